@@ -1,0 +1,272 @@
+//! Mapping points to the grid for one step, and sparse assembly.
+//!
+//! Each step the points' stencils are computed once, the active nodes found
+//! and numbered ([`DofMap`]), and points that touch the same nodes are
+//! grouped. Assembly is local then global: a group's dense matrix
+//! `K_g = sum_p V_p B_p^T D_p B_p` is accumulated over its points, then its
+//! free-free lower-triangle entries are scattered into the global matrix
+//! through a [`Pattern`] built once per step (faer triplet indices with their
+//! argsort), so refilling values for another iteration is a copy.
+
+use crate::basis::{stencil, Stencil};
+use crate::grid::Grid;
+use crate::model::{Body, DirichletLine};
+use crate::points::Points;
+use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+use std::collections::BTreeMap;
+
+/// What a node's displacement component is this step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dof {
+    /// No point touches the node: not part of the system.
+    Inactive,
+    /// Unknown number `i` of the reduced system.
+    Free(usize),
+    /// Prescribed value number `i` in [`DofMap::constrained`].
+    Fixed(usize),
+}
+
+/// Numbering of the active degrees of freedom of one step.
+#[derive(Clone, Debug)]
+pub struct DofMap {
+    /// Per grid node, its x and y components.
+    pub node_dof: Vec<[Dof; 2]>,
+    pub n_free: usize,
+    /// Prescribed components: `(node, component, increment this step)` (m).
+    pub constrained: Vec<(usize, usize, f64)>,
+    pub active_nodes: usize,
+}
+
+/// Points that touch the same nodes, and those nodes.
+#[derive(Clone, Debug)]
+pub struct Group {
+    pub nodes: Vec<usize>,
+    pub points: Vec<usize>,
+}
+
+/// The sparsity pattern of the reduced stiffness (lower triangle) and where
+/// each group's local entries go.
+pub struct Pattern {
+    pub n: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+    argsort: Argsort<usize>,
+    /// Per group, the local entries `(r, c)` (indices into the group's
+    /// `2m x 2m` matrix) that are free-free lower-triangle entries, in
+    /// triplet order.
+    local: Vec<Vec<(u16, u16)>>,
+    /// Number of triplets.
+    pub len: usize,
+}
+
+/// The points mapped to the grid at the start of a step.
+pub struct Mapping {
+    pub stencils: Vec<Stencil>,
+    pub groups: Vec<Group>,
+    pub dofs: DofMap,
+    /// Cells that contain at least one point with volume.
+    pub active_cells: Vec<usize>,
+}
+
+impl Mapping {
+    /// Map the points (at their current positions) to the grid and number
+    /// the dofs; prescribed components get `value * dlambda` as this step's
+    /// increment.
+    pub fn build(grid: &Grid, pts: &Points, bodies: &[Body], dirichlet: &[DirichletLine], dlambda: f64) -> Mapping {
+        let stencils: Vec<Stencil> = (0..pts.len())
+            .map(|p| stencil(grid, bodies[pts.body[p]].basis, pts.x[p], pts.lp[p]))
+            .collect();
+        let mut by_key: BTreeMap<(u32, u32, u8, u8), Vec<usize>> = BTreeMap::new();
+        for (p, s) in stencils.iter().enumerate() {
+            if pts.vol[p] > 0.0 {
+                by_key.entry(s.key).or_default().push(p);
+            }
+        }
+        let groups: Vec<Group> = by_key
+            .into_values()
+            .map(|points| Group {
+                nodes: stencils[points[0]].nodes[..stencils[points[0]].len].to_vec(),
+                points,
+            })
+            .collect();
+
+        let mut active = vec![false; grid.num_nodes()];
+        for g in &groups {
+            for &n in &g.nodes {
+                active[n] = true;
+            }
+        }
+        let mut cells = vec![false; grid.num_cells()];
+        for p in 0..pts.len() {
+            if pts.vol[p] > 0.0 {
+                if let Some((i, j)) = grid.cell_of(pts.x[p]) {
+                    cells[j * grid.nx + i] = true;
+                }
+            }
+        }
+        let active_cells = (0..cells.len()).filter(|&c| cells[c]).collect();
+
+        // Prescribed components: later conditions override earlier ones.
+        let mut prescribed: Vec<[Option<f64>; 2]> = vec![[None, None]; grid.num_nodes()];
+        for d in dirichlet {
+            let count = if d.axis == 0 { grid.ny + 1 } else { grid.nx + 1 };
+            for k in 0..count {
+                let n = if d.axis == 0 {
+                    grid.node(d.index, k)
+                } else {
+                    grid.node(k, d.index)
+                };
+                for c in 0..2 {
+                    if let Some(v) = d.value[c] {
+                        prescribed[n][c] = Some(v * dlambda);
+                    }
+                }
+            }
+        }
+
+        let mut node_dof = vec![[Dof::Inactive; 2]; grid.num_nodes()];
+        let (mut n_free, mut constrained, mut active_nodes) = (0, Vec::new(), 0);
+        for n in 0..grid.num_nodes() {
+            if !active[n] {
+                continue;
+            }
+            active_nodes += 1;
+            for c in 0..2 {
+                node_dof[n][c] = match prescribed[n][c] {
+                    Some(v) => {
+                        constrained.push((n, c, v));
+                        Dof::Fixed(constrained.len() - 1)
+                    }
+                    None => {
+                        n_free += 1;
+                        Dof::Free(n_free - 1)
+                    }
+                };
+            }
+        }
+        Mapping {
+            stencils,
+            groups,
+            dofs: DofMap {
+                node_dof,
+                n_free,
+                constrained,
+                active_nodes,
+            },
+            active_cells,
+        }
+    }
+
+    /// The sparsity pattern of the reduced stiffness for these groups.
+    pub fn pattern(&self) -> Pattern {
+        let mut pairs = Vec::new();
+        let mut local = Vec::with_capacity(self.groups.len());
+        for g in &self.groups {
+            let dofs = self.group_dofs(g);
+            let mut l = Vec::new();
+            for (c, dc) in dofs.iter().enumerate() {
+                let Dof::Free(col) = *dc else { continue };
+                for (r, dr) in dofs.iter().enumerate() {
+                    if let Dof::Free(row) = *dr {
+                        if row >= col {
+                            pairs.push(Pair::new(row, col));
+                            l.push((r as u16, c as u16));
+                        }
+                    }
+                }
+            }
+            local.push(l);
+        }
+        let n = self.dofs.n_free;
+        let (symbolic, argsort) =
+            SymbolicSparseColMat::try_new_from_indices(n, n, &pairs).expect("indices are in range by construction");
+        Pattern {
+            n,
+            symbolic,
+            argsort,
+            local,
+            len: pairs.len(),
+        }
+    }
+
+    /// The dofs of a group's nodes, `[x0, y0, x1, y1, ...]`.
+    pub fn group_dofs(&self, g: &Group) -> Vec<Dof> {
+        g.nodes.iter().flat_map(|&n| self.dofs.node_dof[n]).collect()
+    }
+
+    /// Local stiffness of a group: `K_g = sum_p V_p B_p^T D_p B_p`, a dense
+    /// row-major `2m x 2m` matrix, `m` = number of nodes.
+    pub fn group_stiffness(&self, g: &Group, pts: &Points, d_of: &impl Fn(usize) -> [[f64; 3]; 3], out: &mut Vec<f64>) {
+        let m2 = 2 * g.nodes.len();
+        out.clear();
+        out.resize(m2 * m2, 0.0);
+        for &p in &g.points {
+            let s = &self.stencils[p];
+            let d = d_of(p);
+            let v = pts.vol[p];
+            for a in 0..s.len {
+                let [ax, ay] = s.dw[a];
+                // Rows of B^T for node a: [[ax, 0, ay], [0, ay, ax]]; times D.
+                let bd = [
+                    [
+                        ax * d[0][0] + ay * d[2][0],
+                        ax * d[0][1] + ay * d[2][1],
+                        ax * d[0][2] + ay * d[2][2],
+                    ],
+                    [
+                        ay * d[1][0] + ax * d[2][0],
+                        ay * d[1][1] + ax * d[2][1],
+                        ay * d[1][2] + ax * d[2][2],
+                    ],
+                ];
+                for b in 0..s.len {
+                    let [bx, by] = s.dw[b];
+                    // Columns of B for node b: [bx, 0, by] and [0, by, bx].
+                    for (i, row) in bd.iter().enumerate() {
+                        let kx = row[0] * bx + row[2] * by;
+                        let ky = row[1] * by + row[2] * bx;
+                        out[(2 * a + i) * m2 + 2 * b] += v * kx;
+                        out[(2 * a + i) * m2 + 2 * b + 1] += v * ky;
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl Pattern {
+    /// Assemble the reduced stiffness (lower triangle) and the coupling
+    /// `K_fc du_c` of free rows to prescribed increments.
+    pub fn assemble(
+        &self,
+        map: &Mapping,
+        pts: &Points,
+        d_of: &impl Fn(usize) -> [[f64; 3]; 3],
+    ) -> (SparseColMat<usize, f64>, Vec<f64>) {
+        let mut values = Vec::with_capacity(self.len);
+        let mut coupling = vec![0.0; self.n];
+        let mut kg = Vec::new();
+        for (g, local) in map.groups.iter().zip(&self.local) {
+            map.group_stiffness(g, pts, d_of, &mut kg);
+            let m2 = 2 * g.nodes.len();
+            for &(r, c) in local {
+                values.push(kg[r as usize * m2 + c as usize]);
+            }
+            let dofs = map.group_dofs(g);
+            for (c, dc) in dofs.iter().enumerate() {
+                let Dof::Fixed(k) = *dc else { continue };
+                let du = map.dofs.constrained[k].2;
+                if du == 0.0 {
+                    continue;
+                }
+                for (r, dr) in dofs.iter().enumerate() {
+                    if let Dof::Free(row) = *dr {
+                        coupling[row] += kg[r * m2 + c] * du;
+                    }
+                }
+            }
+        }
+        let k = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, &values)
+            .expect("allocation of the stiffness matrix");
+        (k, coupling)
+    }
+}

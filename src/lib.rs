@@ -1,0 +1,39 @@
+//! # mpmlab: the implicit material point method with boundaries that do not follow the grid
+//!
+//! A scene file (TOML) becomes a [`scene::Scene`], is validated into a
+//! [`model::Model`] (grid, materials, bodies filled with material points,
+//! boundary conditions, loads), and a [`simulation::Simulation`] advances it
+//! one load step at a time. Each step:
+//!
+//! 1. map the points to the grid (stencils of the standard or GIMP basis,
+//!    active nodes, dof numbering) — [`assembly::Mapping`];
+//! 2. assemble the reduced stiffness and the out-of-balance force — [`assembly::Pattern`];
+//! 3. factorise (sparse Cholesky, faer) — [`linalg`];
+//! 4. solve for the nodal increments, check the residual;
+//! 5. update point strains, stresses, positions and volumes, forget the grid.
+//!
+//! A step returns a [`simulation::StepReport`] (residuals, timings, energies,
+//! condition number, errors against the exact solution) or a
+//! [`simulation::StepFailure`]. Observers — the terminal UI ([`tui`]), the
+//! rerun recorder ([`record`]) and the tests — only read reports and state;
+//! the engine modules never import them.
+
+pub mod assembly;
+pub mod basis;
+pub mod colormap;
+pub mod exact;
+pub mod field;
+pub mod geometry;
+pub mod grid;
+pub mod linalg;
+pub mod material;
+pub mod model;
+pub mod points;
+pub mod quadrature;
+pub mod record;
+pub mod scene;
+pub mod simulation;
+pub mod tui;
+
+pub use model::Model;
+pub use simulation::{Params, Simulation, Snapshot, StepFailure, StepReport};

@@ -1,0 +1,341 @@
+//! The `mpmlab` command line: run scenes headless, check them, list them,
+//! or step them in the terminal UI.
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use mpmlab::record::Recorder;
+use mpmlab::scene::Scene;
+use mpmlab::simulation::{Simulation, StepReport};
+use mpmlab::Model;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// The scene opened by `mpmlab` with no arguments (also built in, so the
+/// command works from any directory).
+const DEFAULT_SCENE: &str = "scenarios/column-small-strain.toml";
+const DEFAULT_SCENE_TEXT: &str = include_str!("../scenarios/column-small-strain.toml");
+
+#[derive(Parser)]
+#[command(name = "mpmlab", version, about = "Implicit material point method laboratory")]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Cmd>,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run a scene headless: per-step table and summary.
+    Run {
+        scene: PathBuf,
+        /// Write a rerun recording (.rrd) of the run.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Print only the summary.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Validate a scene file without running it.
+    Check { scene: PathBuf },
+    /// List the scenes in a folder with their descriptions.
+    List {
+        #[arg(default_value = "scenarios")]
+        dir: PathBuf,
+    },
+    /// Step a scene interactively in the terminal.
+    Tui {
+        scene: Option<PathBuf>,
+        /// Recording file (default recordings/<scene>-<time>.rrd).
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Do not record.
+        #[arg(long, conflicts_with = "record")]
+        no_record: bool,
+    },
+}
+
+/// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed.
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Some(Cmd::Run { scene, record, quiet }) => run(&scene, record.as_deref(), quiet),
+        Some(Cmd::Check { scene }) => check(&scene),
+        Some(Cmd::List { dir }) => list(&dir),
+        Some(Cmd::Tui {
+            scene,
+            record,
+            no_record,
+        }) => tui(scene.as_deref(), record, no_record),
+        None => tui(None, None, false),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn load(path: &Path) -> Result<(Simulation, String), ExitCode> {
+    let (scene, text) = Scene::load(path).map_err(|e| {
+        eprintln!("error: {e}");
+        ExitCode::from(2)
+    })?;
+    let model = Model::build(&scene, &text, &path.display().to_string()).map_err(|e| {
+        eprintln!("error: {e}");
+        ExitCode::from(2)
+    })?;
+    Ok((Simulation::new(model), text))
+}
+
+fn check(path: &Path) -> Result<ExitCode> {
+    let (sim, _) = match load(path) {
+        Ok(s) => s,
+        Err(code) => return Ok(code),
+    };
+    let m = sim.model();
+    println!(
+        "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps",
+        path.display(),
+        m.name,
+        m.grid.nx,
+        m.grid.ny,
+        m.grid.h,
+        m.bodies.len(),
+        m.points.len(),
+        m.analysis.load_steps
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn list(dir: &Path) -> Result<ExitCode> {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    entries.sort();
+    for p in entries {
+        let file = p.display().to_string();
+        match std::fs::read_to_string(&p)
+            .map_err(|e| e.to_string())
+            .and_then(|t| Scene::parse(&t, &file).map_err(|e| e.to_string()))
+        {
+            Ok(s) => {
+                let desc = s.scene.description.split_whitespace().collect::<Vec<_>>().join(" ");
+                println!("{:<28} {}", s.scene.name, desc);
+            }
+            Err(e) => println!("{:<28} (invalid: {e})", file),
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn header(first: Option<&StepReport>) -> String {
+    let mut h = format!(
+        "{:>5} {:>7} {:>8} {:>10} {:>10} {:>18} {:>11} {:>11}",
+        "step", "lambda", "unknowns", "residual", "cond(K)", "method", "strain U", "work W"
+    );
+    for e in first.map(|r| r.errors.as_slice()).unwrap_or(&[]) {
+        h.push_str(&format!(" {:>15}", e.name));
+    }
+    h.push_str(&format!(
+        " {:>8} {:>8} {:>8} {:>8}",
+        "asm s", "fact s", "solve s", "total s"
+    ));
+    h
+}
+
+fn row(r: &StepReport) -> String {
+    let (cond, method) = r.condition.map_or(("-".to_string(), "off"), |c| {
+        (format!("{:.3e}", c.value), c.method.label())
+    });
+    let mut s = format!(
+        "{:>5} {:>7.4} {:>8} {:>10.3e} {:>10} {:>18} {:>11.4e} {:>11.4e}",
+        r.step,
+        r.load_factor,
+        r.unknowns,
+        r.residuals.last().copied().unwrap_or(f64::NAN),
+        cond,
+        method,
+        r.energy.strain,
+        r.energy.external_work
+    );
+    for e in &r.errors {
+        s.push_str(&format!(" {:>15.4e}", e.value));
+    }
+    let t = &r.timings;
+    s.push_str(&format!(
+        " {:>8.4} {:>8.4} {:>8.4} {:>8.4}",
+        t.assembly, t.factorisation, t.solve, t.total
+    ));
+    s
+}
+
+fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
+    let (mut sim, text) = match load(path) {
+        Ok(s) => s,
+        Err(code) => return Ok(code),
+    };
+    let mut recorder = match record {
+        Some(p) => match Recorder::create(p, &text, &sim, false) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(3));
+            }
+        },
+        None => None,
+    };
+    let m = sim.model();
+    println!(
+        "scene `{}`: grid {}x{} h={}, {} points, {} load steps",
+        m.name,
+        m.grid.nx,
+        m.grid.ny,
+        m.grid.h,
+        m.points.len(),
+        m.analysis.load_steps
+    );
+    let mut code = ExitCode::SUCCESS;
+    let mut last: Option<StepReport> = None;
+    let mut total_time = 0.0;
+    while !sim.finished() {
+        match sim.step() {
+            Ok(r) => {
+                if !quiet {
+                    if last.is_none() {
+                        println!("{}", header(Some(&r)));
+                    }
+                    println!("{}", row(&r));
+                }
+                total_time += r.timings.total;
+                if let Some(rec) = recorder.as_mut() {
+                    if let Err(e) = rec.log_step(&r, &sim) {
+                        eprintln!("error: {e}; continuing without recording");
+                        recorder = None;
+                        code = ExitCode::from(3);
+                    }
+                }
+                last = Some(r);
+            }
+            Err(f) => {
+                eprintln!("error: {f}");
+                if let Some(rec) = recorder.as_mut() {
+                    let _ = rec.log_failure(&f);
+                }
+                code = ExitCode::from(1);
+                break;
+            }
+        }
+    }
+    if let Some(r) = &last {
+        let errs: Vec<String> = r
+            .errors
+            .iter()
+            .map(|e| format!("{} = {:.4e}", e.name, e.value))
+            .collect();
+        println!(
+            "summary: {}/{} steps, {:.3} s in steps, final strain energy {:.6e} J, work {:.6e} J{}{}",
+            sim.step_index(),
+            sim.load_steps(),
+            total_time,
+            r.energy.strain,
+            r.energy.external_work,
+            r.condition.map_or(String::new(), |c| format!(
+                ", cond(K) {:.3e} ({})",
+                c.value,
+                c.method.label()
+            )),
+            if errs.is_empty() {
+                String::new()
+            } else {
+                format!(", {}", errs.join(", "))
+            }
+        );
+    }
+    if let Some(rec) = recorder {
+        let p = rec.path().display().to_string();
+        let _ = rec.event(
+            if code == ExitCode::SUCCESS {
+                "run complete"
+            } else {
+                "run ended early"
+            },
+            "INFO",
+        );
+        match rec.finish() {
+            Ok(()) => println!("recording: {p}  (replay: rerun {p})"),
+            Err(e) => {
+                eprintln!("error: {e}");
+                code = ExitCode::from(3);
+            }
+        }
+    }
+    Ok(code)
+}
+
+fn timestamp() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs()) as i64;
+    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+fn tui(scene: Option<&Path>, record: Option<PathBuf>, no_record: bool) -> Result<ExitCode> {
+    let (sim, text) = match scene {
+        Some(p) => match load(p) {
+            Ok(s) => s,
+            Err(code) => return Ok(code),
+        },
+        None if Path::new(DEFAULT_SCENE).exists() => match load(Path::new(DEFAULT_SCENE)) {
+            Ok(s) => s,
+            Err(code) => return Ok(code),
+        },
+        None => match Simulation::from_scene_text(DEFAULT_SCENE_TEXT, DEFAULT_SCENE) {
+            Ok(s) => (s, DEFAULT_SCENE_TEXT.to_string()),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(2));
+            }
+        },
+    };
+    let recorder = if no_record {
+        None
+    } else {
+        let path =
+            record.unwrap_or_else(|| PathBuf::from(format!("recordings/{}-{}.rrd", sim.model().name, timestamp())));
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        }
+        match Recorder::create(&path, &text, &sim, false) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(3));
+            }
+        }
+    };
+    let path = recorder.as_ref().map(|r| r.path().display().to_string());
+    mpmlab::tui::run(sim, recorder).context("terminal UI")?;
+    if let Some(p) = path {
+        println!("recording: {p}  (replay: rerun {p})");
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,53 @@
+//! Constitutive models. Stress and strain use Voigt order `[xx, yy, xy]`
+//! with engineering shear strain `gamma_xy = 2 e_xy`.
+
+use crate::scene::Plane;
+
+/// Isotropic linear elasticity: Young's modulus `e` (Pa), Poisson's ratio
+/// `nu`, mass density (kg/m^3), in plane strain or plane stress.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinearElastic {
+    pub e: f64,
+    pub nu: f64,
+    pub density: f64,
+    pub plane: Plane,
+}
+
+impl LinearElastic {
+    /// The 3x3 elasticity matrix `D` with `s = D e` (Pa).
+    pub fn d_matrix(&self) -> [[f64; 3]; 3] {
+        let (e, nu) = (self.e, self.nu);
+        match self.plane {
+            Plane::Strain => {
+                let lambda = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+                let mu = e / (2.0 * (1.0 + nu));
+                [
+                    [lambda + 2.0 * mu, lambda, 0.0],
+                    [lambda, lambda + 2.0 * mu, 0.0],
+                    [0.0, 0.0, mu],
+                ]
+            }
+            Plane::Stress => {
+                let c = e / (1.0 - nu * nu);
+                [[c, c * nu, 0.0], [c * nu, c, 0.0], [0.0, 0.0, c * (1.0 - nu) / 2.0]]
+            }
+        }
+    }
+
+    /// Out-of-plane stress `s_zz` (zero in plane stress).
+    pub fn szz(&self, s: [f64; 3]) -> f64 {
+        match self.plane {
+            Plane::Strain => self.nu * (s[0] + s[1]),
+            Plane::Stress => 0.0,
+        }
+    }
+}
+
+/// `D e` for a 3x3 matrix and a Voigt vector.
+pub fn mul3(d: &[[f64; 3]; 3], e: [f64; 3]) -> [f64; 3] {
+    [
+        d[0][0] * e[0] + d[0][1] * e[1] + d[0][2] * e[2],
+        d[1][0] * e[0] + d[1][1] * e[1] + d[1][2] * e[2],
+        d[2][0] * e[0] + d[2][1] * e[1] + d[2][2] * e[2],
+    ]
+}

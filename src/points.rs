@@ -1,0 +1,53 @@
+//! Material point state, stored as a struct of arrays.
+
+use crate::geometry::P2;
+
+/// All material points of a model. Index `p` runs over every array.
+#[derive(Clone, Debug, Default)]
+pub struct Points {
+    /// Current position (m).
+    pub x: Vec<P2>,
+    /// Position at generation (m): the reference coordinate `X` exact
+    /// solutions are evaluated at.
+    pub x0: Vec<P2>,
+    /// Current volume (m^3 per unit thickness).
+    pub vol: Vec<f64>,
+    pub vol0: Vec<f64>,
+    /// Mass (kg per unit thickness).
+    pub mass: Vec<f64>,
+    /// Cauchy stress `[xx, yy, xy]` (Pa).
+    pub stress: Vec<[f64; 3]>,
+    /// Small strain `[xx, yy, gamma_xy]` accumulated over the steps.
+    pub strain: Vec<[f64; 3]>,
+    /// GIMP domain half-lengths (m).
+    pub lp: Vec<P2>,
+    /// Index of the body the point belongs to.
+    pub body: Vec<usize>,
+}
+
+impl Points {
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Displacement since generation (m).
+    pub fn displacement(&self, p: usize) -> P2 {
+        [self.x[p][0] - self.x0[p][0], self.x[p][1] - self.x0[p][1]]
+    }
+
+    pub fn push(&mut self, x: P2, vol: f64, density: f64, lp: P2, body: usize) {
+        self.x.push(x);
+        self.x0.push(x);
+        self.vol.push(vol);
+        self.vol0.push(vol);
+        self.mass.push(vol * density);
+        self.stress.push([0.0; 3]);
+        self.strain.push([0.0; 3]);
+        self.lp.push(lp);
+        self.body.push(body);
+    }
+}

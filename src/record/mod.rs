@@ -1,0 +1,237 @@
+//! rerun recordings of a run: one `.rrd` file per run.
+//!
+//! Timelines: `step` (load step) and `iteration` (a global counter over
+//! every residual evaluation of the run). Entities:
+//!
+//! | entity | archetype | when |
+//! |---|---|---|
+//! | `scene` | TextDocument (the scene file) | static |
+//! | `grid` | LineStrips2D | static |
+//! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
+//! | `points` | Points2D, coloured by sigma_yy, radius from volume | every step |
+//! | `metrics/residual` | Scalars, on `iteration` | every iteration |
+//! | `metrics/condition/stiffness` | Scalars | every step |
+//! | `metrics/log10/residual`, `metrics/log10/condition/stiffness` | Scalars | as above |
+//! | `metrics/energy/strain`, `metrics/energy/external_work` | Scalars | every step |
+//! | `metrics/error/<measure>` | Scalars | every step with an exact solution |
+//! | `metrics/time/<phase>` | Scalars (s) | every step |
+//! | `metrics/unknowns` | Scalars | every step |
+//! | `events` | TextLog (start, failures, end) | as they happen |
+//!
+//! The engine knows nothing of this module: it reads reports and state.
+
+use crate::colormap;
+use crate::field::Field;
+use crate::simulation::{Simulation, StepFailure, StepReport};
+use rerun::{RecordingStream, RecordingStreamBuilder};
+use std::path::{Path, PathBuf};
+
+/// Why a recording could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("cannot write recording {path}: {message}")]
+    Create { path: PathBuf, message: String },
+    #[error("recording {path}: {message}")]
+    Write { path: PathBuf, message: String },
+}
+
+/// Writes one run to an `.rrd` file.
+pub struct Recorder {
+    rec: RecordingStream,
+    path: PathBuf,
+    iteration: i64,
+    field: Field,
+}
+
+/// Application id under which mpmlab recordings appear in the viewer.
+pub const APP_ID: &str = "mpmlab";
+
+impl Recorder {
+    /// Create the file and log the static parts (scene text, grid) and the
+    /// initial state. With `deterministic`, the recording id is fixed and
+    /// no wall-clock timeline is added (for tests).
+    pub fn create(
+        path: &Path,
+        scene_text: &str,
+        sim: &Simulation,
+        deterministic: bool,
+    ) -> Result<Recorder, RecordError> {
+        let err = |m: String| RecordError::Create {
+            path: path.to_path_buf(),
+            message: m,
+        };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !dir.is_dir() {
+                return Err(err(format!("directory {} does not exist", dir.display())));
+            }
+        }
+        // Fail early and clearly on an unwritable path (the file sink would
+        // only report it from its writer thread).
+        std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
+        let mut builder = RecordingStreamBuilder::new(APP_ID);
+        if deterministic {
+            builder = builder.recording_id("mpmlab-test");
+        }
+        let rec = builder.save(path).map_err(|e| err(e.to_string()))?;
+        if deterministic {
+            rec.set_log_time_enabled(false);
+        }
+        let r = Recorder {
+            rec,
+            path: path.to_path_buf(),
+            iteration: 0,
+            field: Field::SigmaYy,
+        };
+        r.log_static(scene_text, sim)?;
+        r.log_state(sim)?;
+        r.event(
+            &format!(
+                "start: scene `{}`, {} points, {} load steps",
+                sim.model().name,
+                sim.points().len(),
+                sim.load_steps()
+            ),
+            rerun::TextLogLevel::INFO,
+        )?;
+        Ok(r)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn check<T, E: std::fmt::Display>(&self, r: Result<T, E>) -> Result<T, RecordError> {
+        r.map_err(|e| RecordError::Write {
+            path: self.path.clone(),
+            message: e.to_string(),
+        })
+    }
+
+    fn log_static(&self, scene_text: &str, sim: &Simulation) -> Result<(), RecordError> {
+        let doc = format!("```toml\n{scene_text}\n```");
+        self.check(self.rec.log_static(
+            "scene",
+            &rerun::TextDocument::new(doc).with_media_type(rerun::MediaType::markdown()),
+        ))?;
+        let g = &sim.model().grid;
+        let max = g.max();
+        let mut strips = Vec::new();
+        for i in 0..=g.nx {
+            let x = (g.origin[0] + i as f64 * g.h) as f32;
+            strips.push(vec![[x, g.origin[1] as f32], [x, max[1] as f32]]);
+        }
+        for j in 0..=g.ny {
+            let y = (g.origin[1] + j as f64 * g.h) as f32;
+            strips.push(vec![[g.origin[0] as f32, y], [max[0] as f32, y]]);
+        }
+        self.check(
+            self.rec.log_static(
+                "grid",
+                &rerun::LineStrips2D::new(strips)
+                    .with_colors([rerun::Color::from_rgb(90, 90, 90)])
+                    .with_radii([rerun::Radius::new_ui_points(0.5)]),
+            ),
+        )
+    }
+
+    /// Log the points and active cells at the simulation's current step.
+    pub fn log_state(&self, sim: &Simulation) -> Result<(), RecordError> {
+        self.rec.set_time_sequence("step", sim.step_index() as i64);
+        let pts = sim.points();
+        let values = self.field.values(sim);
+        let (lo, hi) = colormap::range(values.iter().copied());
+        let colors: Vec<rerun::Color> = values
+            .iter()
+            .map(|&v| {
+                let [r, g, b] = colormap::viridis((v - lo) / (hi - lo));
+                rerun::Color::from_rgb(r, g, b)
+            })
+            .collect();
+        let positions: Vec<[f32; 2]> = pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]).collect();
+        let radii: Vec<f32> = pts.vol.iter().map(|v| (0.5 * v.max(0.0).sqrt()) as f32).collect();
+        self.check(self.rec.log(
+            "points",
+            &rerun::Points2D::new(positions).with_colors(colors).with_radii(radii),
+        ))?;
+        let g = &sim.model().grid;
+        let boxes: Vec<Vec<[f32; 2]>> = sim
+            .active_cells()
+            .iter()
+            .map(|&c| {
+                let m = g.cell_min(c % g.nx, c / g.nx);
+                let (x0, y0, x1, y1) = (m[0] as f32, m[1] as f32, (m[0] + g.h) as f32, (m[1] + g.h) as f32);
+                vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+            })
+            .collect();
+        self.check(self.rec.log(
+            "grid/active",
+            &rerun::LineStrips2D::new(boxes).with_colors([rerun::Color::from_rgb(60, 120, 200)]),
+        ))
+    }
+
+    fn scalar(&self, path: &str, v: f64) -> Result<(), RecordError> {
+        if v.is_finite() {
+            self.check(self.rec.log(path, &rerun::Scalars::single(v)))?;
+        }
+        Ok(())
+    }
+
+    /// Log a step's metrics (on `step`, residuals on `iteration`) and the state after it.
+    pub fn log_step(&mut self, report: &StepReport, sim: &Simulation) -> Result<(), RecordError> {
+        self.log_residuals(report.step, &report.residuals)?;
+        self.rec.set_time_sequence("step", report.step as i64);
+        if let Some(c) = &report.condition {
+            self.scalar("metrics/condition/stiffness", c.value)?;
+            self.scalar("metrics/log10/condition/stiffness", c.value.log10())?;
+        }
+        self.scalar("metrics/energy/strain", report.energy.strain)?;
+        self.scalar("metrics/energy/external_work", report.energy.external_work)?;
+        for e in &report.errors {
+            self.scalar(&format!("metrics/error/{}", e.name), e.value)?;
+        }
+        let t = &report.timings;
+        for (name, v) in [
+            ("assembly", t.assembly),
+            ("factorisation", t.factorisation),
+            ("solve", t.solve),
+            ("condition", t.condition),
+            ("total", t.total),
+        ] {
+            self.scalar(&format!("metrics/time/{name}"), v)?;
+        }
+        self.scalar("metrics/unknowns", report.unknowns as f64)?;
+        self.log_state(sim)
+    }
+
+    fn log_residuals(&mut self, step: usize, residuals: &[f64]) -> Result<(), RecordError> {
+        self.rec.set_time_sequence("step", step as i64);
+        for &r in residuals {
+            self.iteration += 1;
+            self.rec.set_time_sequence("iteration", self.iteration);
+            self.scalar("metrics/residual", r)?;
+            if r > 0.0 {
+                self.scalar("metrics/log10/residual", r.log10())?;
+            }
+        }
+        self.rec.reset_time();
+        Ok(())
+    }
+
+    /// Log a failed step: its residual history and an error event.
+    pub fn log_failure(&mut self, failure: &StepFailure) -> Result<(), RecordError> {
+        self.log_residuals(failure.step(), failure.residuals())?;
+        self.rec.set_time_sequence("step", failure.step() as i64);
+        self.event(&failure.to_string(), rerun::TextLogLevel::ERROR)
+    }
+
+    /// Log a text event at the current step.
+    pub fn event(&self, text: &str, level: &str) -> Result<(), RecordError> {
+        self.check(self.rec.log("events", &rerun::TextLog::new(text).with_level(level)))
+    }
+
+    /// Flush everything to disk and close the file.
+    pub fn finish(self) -> Result<(), RecordError> {
+        let r = self.rec.flush_blocking();
+        self.check(r)
+    }
+}

@@ -1,0 +1,250 @@
+//! Scene files: the TOML a user writes, as plain serde data.
+//!
+//! A scene names the grid, materials, bodies (regions filled with material
+//! points), boundary conditions, loads, the analysis and optionally an exact
+//! solution. [`Scene::parse`] checks syntax and keys; [`crate::model::Model::build`]
+//! checks meaning (E > 0, -1 < nu < 0.5, bodies inside the grid, ...). Both
+//! report a [`SceneError`] naming file, line and field.
+//!
+//! The full schema with every field is documented in `docs/scenes.md`.
+
+mod error;
+pub mod region;
+
+pub use error::{from_toml, line_column, FieldError, Locator, SceneError};
+pub use region::RegionSpec;
+
+use crate::basis::BasisKind;
+use serde::Deserialize;
+use std::path::Path;
+
+/// A whole scene file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    pub scene: SceneMeta,
+    pub grid: GridSpec,
+    #[serde(rename = "material")]
+    pub materials: Vec<MaterialSpec>,
+    #[serde(rename = "body")]
+    pub bodies: Vec<BodySpec>,
+    #[serde(default, rename = "dirichlet")]
+    pub dirichlet: Vec<DirichletSpec>,
+    #[serde(default)]
+    pub loads: LoadsSpec,
+    pub analysis: AnalysisSpec,
+    #[serde(default)]
+    pub exact: Option<ExactSpec>,
+}
+
+/// `[scene]`: name and a one-paragraph description (shown by `mpmlab list`).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneMeta {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+}
+
+/// `[grid]`: lower-left `origin` (m), `size` = extent (m), cell size `h` (m).
+/// `size` must be a whole number of cells.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSpec {
+    pub origin: [f64; 2],
+    pub size: [f64; 2],
+    pub h: f64,
+}
+
+/// Plane strain (`e_zz = 0`) or plane stress (`s_zz = 0`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Plane {
+    #[default]
+    Strain,
+    Stress,
+}
+
+/// Constitutive model of a material.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MaterialModel {
+    #[default]
+    LinearElastic,
+}
+
+/// `[[material]]`: Young's modulus `E` (Pa), Poisson's ratio `nu`, mass
+/// `density` (kg/m^3).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    pub name: String,
+    #[serde(default)]
+    pub model: MaterialModel,
+    #[serde(rename = "E")]
+    pub e: f64,
+    pub nu: f64,
+    #[serde(default)]
+    pub density: f64,
+    #[serde(default)]
+    pub plane: Plane,
+}
+
+/// Where a body's points go inside each cell.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Placement {
+    /// n x n sub-cells clipped against the region; point at the clipped
+    /// centroid, volume = clipped area (C Fig. 4).
+    #[default]
+    Clipped,
+    /// n x n Gauss-Legendre points with Gauss weights as volumes: the
+    /// finite-element limit. Cells must lie wholly inside or outside the region.
+    Gauss,
+}
+
+/// `[[body]]`: a region filled with points of one material.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodySpec {
+    pub name: String,
+    pub material: String,
+    /// n: the body gets n x n points per cell.
+    pub points_per_cell: usize,
+    #[serde(default)]
+    pub basis: BasisKind,
+    #[serde(default)]
+    pub placement: Placement,
+    pub region: RegionSpec,
+}
+
+/// Kind of a grid-aligned Dirichlet condition.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DirichletKind {
+    /// Both displacement components prescribed.
+    Fixed,
+    /// The component normal to the line prescribed, the tangential free.
+    Roller,
+}
+
+/// `[[dirichlet]]`: a condition on every active node of the grid line
+/// `x = c` or `y = c`. Values are totals at load factor 1 (m), applied in
+/// proportion to the load factor; zero when omitted.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DirichletSpec {
+    pub kind: DirichletKind,
+    #[serde(default)]
+    pub x: Option<f64>,
+    #[serde(default)]
+    pub y: Option<f64>,
+    /// For `fixed`: the prescribed displacement vector.
+    #[serde(default)]
+    pub displacement: Option<[f64; 2]>,
+    /// For `roller`: the prescribed displacement along the axis normal to the line.
+    #[serde(default)]
+    pub normal_displacement: Option<f64>,
+}
+
+/// `[loads]`: gravity (m/s^2, times each material's density) and point loads.
+/// All loads are totals at load factor 1.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadsSpec {
+    #[serde(default)]
+    pub gravity: Option<[f64; 2]>,
+    #[serde(default)]
+    pub point: Vec<PointLoadSpec>,
+}
+
+/// `[[loads.point]]`: force `force` (N per unit thickness) applied through the
+/// basis functions at the material point nearest to `at`, following that
+/// point as it moves.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointLoadSpec {
+    pub at: [f64; 2],
+    pub force: [f64; 2],
+}
+
+/// The analysis type.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AnalysisKind {
+    /// Small strain, one linear solve per load step on the current
+    /// configuration (B, C).
+    #[default]
+    QuasiStaticLinear,
+}
+
+/// How condition numbers are computed each step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ConditionMode {
+    /// Dense eigenvalues up to `dense_limit` unknowns, Lanczos above.
+    #[default]
+    Auto,
+    Dense,
+    Lanczos,
+    Off,
+}
+
+/// `[analysis]`
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AnalysisSpec {
+    #[serde(default)]
+    pub kind: AnalysisKind,
+    pub load_steps: usize,
+    /// Largest accepted relative residual `|K du - r| / |r|` of a step.
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    #[serde(default)]
+    pub condition: ConditionMode,
+    /// Largest system solved with dense eigenvalues in `auto` mode.
+    #[serde(default = "default_dense_limit")]
+    pub dense_limit: usize,
+}
+
+fn default_tolerance() -> f64 {
+    1e-8
+}
+
+fn default_dense_limit() -> usize {
+    1500
+}
+
+/// `[exact]`: an analytical solution to measure errors against.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "name", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ExactSpec {
+    /// Column under self-weight between rollers: `s_yy = -rho g (top - Y)`,
+    /// with `base` the supported bottom (m). Uses the body's material and the
+    /// scene's gravity.
+    ColumnSelfWeight { base: f64, top: f64 },
+    /// Uniaxial stress in y with free lateral faces: total strain
+    /// `strain_yy`, `u = 0` at `anchor`.
+    UniaxialY { strain_yy: f64, anchor: [f64; 2] },
+}
+
+impl Scene {
+    /// Parse scene text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Scene, SceneError> {
+        toml::from_str(text).map_err(|e| from_toml(file, text, &e))
+    }
+
+    /// Read and parse a scene file.
+    pub fn load(path: &Path) -> Result<(Scene, String), SceneError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+            file: file.clone(),
+            line: 0,
+            column: 0,
+            field: "(file)".into(),
+            message: format!("cannot read: {e}"),
+        })?;
+        let scene = Scene::parse(&text, &file)?;
+        Ok((scene, text))
+    }
+}

@@ -1,0 +1,198 @@
+//! Region specifications in scene files and their conversion to
+//! [`geometry::Region`](crate::geometry::Region).
+//!
+//! ```toml
+//! [body.region]
+//! shape = "difference"
+//! base = { shape = "rectangle", min = [0.0, 0.0], max = [2.0, 2.0] }
+//! subtract = [{ shape = "circle", center = [0.0, 0.0], radius = 0.5 }]
+//! ```
+
+use super::FieldError;
+use crate::geometry::{self, chords_for, Region, P2};
+use serde::Deserialize;
+
+/// A region: a primitive shape or a boolean combination, optionally rotated.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "shape", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum RegionSpec {
+    /// Axis-aligned rectangle `[min, max]` (m).
+    Rectangle {
+        min: P2,
+        max: P2,
+    },
+    /// Simple polygon (any orientation, not self-intersecting).
+    Polygon {
+        vertices: Vec<P2>,
+    },
+    /// Disc of `radius` about `center`, flattened to chords within `tolerance` (m; default radius/1e4).
+    Circle {
+        center: P2,
+        radius: f64,
+        #[serde(default)]
+        tolerance: Option<f64>,
+    },
+    /// Part of an annulus between `r_inner` and `r_outer`, angles in degrees
+    /// counter-clockwise from +x.
+    AnnulusSector {
+        center: P2,
+        r_inner: f64,
+        r_outer: f64,
+        start_deg: f64,
+        end_deg: f64,
+        #[serde(default)]
+        tolerance: Option<f64>,
+    },
+    Union {
+        parts: Vec<RegionSpec>,
+    },
+    Difference {
+        base: Box<RegionSpec>,
+        subtract: Vec<RegionSpec>,
+    },
+    /// `region` rotated by `angle_deg` (counter-clockwise) about `about`.
+    Rotated {
+        angle_deg: f64,
+        about: P2,
+        region: Box<RegionSpec>,
+    },
+}
+
+fn finite(field: &str, v: &[f64]) -> Result<(), FieldError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(FieldError::new(field, "must be finite"))
+    }
+}
+
+impl RegionSpec {
+    /// Build the region; `path` is this spec's field path for errors.
+    pub fn build(&self, path: &str) -> Result<Region, FieldError> {
+        let f = |name: &str| format!("{path}.{name}");
+        match self {
+            RegionSpec::Rectangle { min, max } => {
+                finite(&f("min"), min)?;
+                finite(&f("max"), max)?;
+                if !(max[0] > min[0] && max[1] > min[1]) {
+                    return Err(FieldError::new(f("max"), "must exceed `min` in both coordinates"));
+                }
+                Ok(Region::convex(vec![*min, [max[0], min[1]], *max, [min[0], max[1]]]))
+            }
+            RegionSpec::Polygon { vertices } => {
+                if vertices.len() < 3 {
+                    return Err(FieldError::new(f("vertices"), "a polygon needs at least 3 vertices"));
+                }
+                finite(&f("vertices"), &vertices.concat())?;
+                if geometry::self_intersects(vertices) {
+                    return Err(FieldError::new(f("vertices"), "the polygon crosses itself"));
+                }
+                let poly = geometry::ccw(vertices.clone());
+                if geometry::area_centroid(&poly).0 <= 0.0 {
+                    return Err(FieldError::new(f("vertices"), "the polygon has zero area"));
+                }
+                if geometry::is_convex(&poly) {
+                    return Ok(Region::convex(poly));
+                }
+                let tris = geometry::triangulate(&poly)
+                    .ok_or_else(|| FieldError::new(f("vertices"), "the polygon could not be triangulated"))?;
+                Ok(Region {
+                    pieces: tris
+                        .into_iter()
+                        .map(|t| geometry::Piece::new(1.0, t.to_vec()))
+                        .collect(),
+                })
+            }
+            RegionSpec::Circle {
+                center,
+                radius,
+                tolerance,
+            } => {
+                finite(&f("center"), center)?;
+                if !(*radius > 0.0 && radius.is_finite()) {
+                    return Err(FieldError::new(f("radius"), "must be positive"));
+                }
+                let tol = tolerance.unwrap_or(radius * 1e-4);
+                if !(tol > 0.0) {
+                    return Err(FieldError::new(f("tolerance"), "must be positive"));
+                }
+                let n = chords_for(*radius, tol, std::f64::consts::TAU);
+                let poly = (0..n)
+                    .map(|k| {
+                        let t = std::f64::consts::TAU * k as f64 / n as f64;
+                        [center[0] + radius * t.cos(), center[1] + radius * t.sin()]
+                    })
+                    .collect();
+                Ok(Region::convex(poly))
+            }
+            RegionSpec::AnnulusSector {
+                center,
+                r_inner,
+                r_outer,
+                start_deg,
+                end_deg,
+                tolerance,
+            } => {
+                finite(&f("center"), center)?;
+                if !(*r_inner >= 0.0) {
+                    return Err(FieldError::new(f("r_inner"), "must be non-negative"));
+                }
+                if !(r_outer > r_inner && r_outer.is_finite()) {
+                    return Err(FieldError::new(f("r_outer"), "must exceed `r_inner`"));
+                }
+                let sweep = (end_deg - start_deg).to_radians();
+                if !(sweep > 0.0 && sweep <= std::f64::consts::TAU + 1e-12) {
+                    return Err(FieldError::new(f("end_deg"), "must exceed `start_deg` by at most 360"));
+                }
+                let tol = tolerance.unwrap_or(r_outer * 1e-4);
+                let n = chords_for(*r_outer, tol, sweep).max(2);
+                let at = |r: f64, k: usize| {
+                    let t = start_deg.to_radians() + sweep * k as f64 / n as f64;
+                    [center[0] + r * t.cos(), center[1] + r * t.sin()]
+                };
+                // Each angular slice is a convex trapezoid (or a triangle at r_inner = 0).
+                let pieces = (0..n)
+                    .map(|k| {
+                        let mut q = vec![
+                            at(*r_inner, k),
+                            at(*r_outer, k),
+                            at(*r_outer, k + 1),
+                            at(*r_inner, k + 1),
+                        ];
+                        if *r_inner == 0.0 {
+                            q.remove(3);
+                        }
+                        geometry::Piece::new(1.0, geometry::ccw(q))
+                    })
+                    .collect();
+                Ok(Region { pieces })
+            }
+            RegionSpec::Union { parts } => {
+                if parts.is_empty() {
+                    return Err(FieldError::new(f("parts"), "a union needs at least one part"));
+                }
+                let mut r = parts[0].build(&format!("{path}.parts[0]"))?;
+                for (k, p) in parts.iter().enumerate().skip(1) {
+                    r = r.union(&p.build(&format!("{path}.parts[{k}]"))?);
+                }
+                Ok(r)
+            }
+            RegionSpec::Difference { base, subtract } => {
+                let mut r = base.build(&f("base"))?;
+                for (k, p) in subtract.iter().enumerate() {
+                    r = r.difference(&p.build(&format!("{path}.subtract[{k}]"))?);
+                }
+                Ok(r)
+            }
+            RegionSpec::Rotated {
+                angle_deg,
+                about,
+                region,
+            } => {
+                finite(&f("angle_deg"), &[*angle_deg])?;
+                finite(&f("about"), about)?;
+                Ok(region.build(&f("region"))?.rotated(*about, angle_deg.to_radians()))
+            }
+        }
+    }
+}

@@ -1,0 +1,486 @@
+//! The simulation: state, one load step at a time, and what a step reports.
+//!
+//! A quasi-static small-strain step `n -> n+1` (B section 2, C section 2),
+//! on the configuration at the start of the step:
+//!
+//! 1. map points to the grid: stencils, active nodes, dofs ([`Mapping`]);
+//! 2. assemble `K = sum_p B_p^T D B_p V_p`, `f_ext(lambda_{n+1})` and
+//!    `f_int = sum_p B_p^T s_p V_p`;
+//! 3. factorise the reduced `K` (sparse Cholesky);
+//! 4. solve `K du = f_ext - f_int - K_fc du_c` for the free increments;
+//! 5. update points: `de = B du`, `s += D de`, `x += N du`, `V *= det(I + grad du)`;
+//!    the grid is then forgotten.
+//!
+//! Failures (singular system, residual above tolerance, non-finite values)
+//! are returned as [`StepFailure`] and leave the state at the last good step.
+
+use crate::assembly::{Dof, Mapping};
+use crate::exact::ErrorNorm;
+use crate::geometry::P2;
+use crate::linalg::{self, Condition};
+use crate::material::mul3;
+use crate::model::Model;
+use crate::points::Points;
+use crate::scene::ConditionMode;
+use std::fmt;
+use std::time::Instant;
+
+/// Settings that may change between steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Params {
+    /// Largest accepted relative residual `|K du - r| / |r|`.
+    pub tolerance: f64,
+    pub condition: ConditionMode,
+    /// Largest reduced system whose condition number is computed densely.
+    pub dense_limit: usize,
+}
+
+/// Wall-clock time of each phase of a step (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    pub assembly: f64,
+    pub factorisation: f64,
+    pub solve: f64,
+    pub condition: f64,
+    pub update: f64,
+    pub total: f64,
+}
+
+/// Energies after a step (J per unit thickness).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Energy {
+    /// `sum_p 1/2 s_p : e_p V_p`.
+    pub strain: f64,
+    /// Work of loads and supports, trapezoidal in each step.
+    pub external_work: f64,
+}
+
+/// What one successful step did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepReport {
+    /// 1-based step number.
+    pub step: usize,
+    pub load_steps: usize,
+    pub load_factor: f64,
+    /// Free unknowns of the reduced system.
+    pub unknowns: usize,
+    pub active_nodes: usize,
+    pub active_cells: usize,
+    /// `|r|` of the step's right-hand side (N).
+    pub residual_norm: f64,
+    /// Relative residuals per iteration: `1` before the solve, then
+    /// `|K du - r| / |r|` after it (one linear solve per step here).
+    pub residuals: Vec<f64>,
+    pub timings: Timings,
+    pub energy: Energy,
+    pub condition: Option<Condition>,
+    /// Errors against the scene's exact solution, if it names one.
+    pub errors: Vec<ErrorNorm>,
+    /// Largest nodal displacement increment of the step (m).
+    pub max_increment: f64,
+}
+
+/// Why a step did not complete. The state stays at the last good step.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StepFailure {
+    /// Every load step has been taken.
+    Finished { steps: usize },
+    /// The reduced stiffness could not be factorised.
+    Singular { step: usize, reason: String },
+    /// The solve's residual stayed above the tolerance.
+    NotConverged {
+        step: usize,
+        residuals: Vec<f64>,
+        tolerance: f64,
+    },
+    /// A residual, increment or stress was NaN or infinite.
+    NonFinite {
+        step: usize,
+        what: String,
+        residuals: Vec<f64>,
+    },
+}
+
+impl StepFailure {
+    pub fn step(&self) -> usize {
+        match self {
+            StepFailure::Finished { steps } => *steps,
+            StepFailure::Singular { step, .. }
+            | StepFailure::NotConverged { step, .. }
+            | StepFailure::NonFinite { step, .. } => *step,
+        }
+    }
+
+    pub fn residuals(&self) -> &[f64] {
+        match self {
+            StepFailure::NotConverged { residuals, .. } | StepFailure::NonFinite { residuals, .. } => residuals,
+            _ => &[],
+        }
+    }
+}
+
+impl fmt::Display for StepFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StepFailure::Finished { steps } => write!(f, "all {steps} load steps are done"),
+            StepFailure::Singular { step, reason } => write!(f, "step {step} failed: singular system: {reason}"),
+            StepFailure::NotConverged {
+                step,
+                residuals,
+                tolerance,
+            } => write!(
+                f,
+                "step {step} failed: residual {:.3e} above tolerance {tolerance:.1e} (residuals {})",
+                residuals.last().copied().unwrap_or(f64::NAN),
+                fmt_residuals(residuals)
+            ),
+            StepFailure::NonFinite { step, what, residuals } => write!(
+                f,
+                "step {step} failed: non-finite {what} (residuals {})",
+                fmt_residuals(residuals)
+            ),
+        }
+    }
+}
+
+fn fmt_residuals(r: &[f64]) -> String {
+    let v: Vec<String> = r.iter().map(|x| format!("{x:.2e}")).collect();
+    format!("[{}]", v.join(", "))
+}
+
+impl std::error::Error for StepFailure {}
+
+/// The evolving part of a simulation.
+#[derive(Clone, Debug)]
+struct State {
+    points: Points,
+    step: usize,
+    external_work: f64,
+    active_cells: Vec<usize>,
+}
+
+/// A saved state to return to with [`Simulation::restore`].
+#[derive(Clone, Debug)]
+pub struct Snapshot(State);
+
+/// A model and its evolving state.
+pub struct Simulation {
+    model: Model,
+    params: Params,
+    state: State,
+}
+
+impl Simulation {
+    pub fn new(model: Model) -> Simulation {
+        let params = Params {
+            tolerance: model.analysis.tolerance,
+            condition: model.analysis.condition,
+            dense_limit: model.analysis.dense_limit,
+        };
+        let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
+        let state = State {
+            points: model.points.clone(),
+            step: 0,
+            external_work: 0.0,
+            active_cells: map.active_cells,
+        };
+        Simulation { model, params, state }
+    }
+
+    /// Parse, validate and build a scene.
+    pub fn from_scene_text(text: &str, file: &str) -> Result<Simulation, crate::scene::SceneError> {
+        Ok(Simulation::new(Model::from_text(text, file)?))
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    pub fn points(&self) -> &Points {
+        &self.state.points
+    }
+
+    /// Steps taken so far.
+    pub fn step_index(&self) -> usize {
+        self.state.step
+    }
+
+    pub fn load_steps(&self) -> usize {
+        self.model.analysis.load_steps
+    }
+
+    pub fn load_factor(&self) -> f64 {
+        self.state.step as f64 / self.load_steps() as f64
+    }
+
+    /// Cells holding points after the last step.
+    pub fn active_cells(&self) -> &[usize] {
+        &self.state.active_cells
+    }
+
+    pub fn finished(&self) -> bool {
+        self.state.step >= self.load_steps()
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Change settings; they apply from the next step.
+    pub fn set_params(&mut self, params: Params) {
+        self.params = params;
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot(self.state.clone())
+    }
+
+    pub fn restore(&mut self, snapshot: &Snapshot) {
+        self.state = snapshot.0.clone();
+    }
+
+    /// Take one load step.
+    pub fn step(&mut self) -> Result<StepReport, StepFailure> {
+        if self.finished() {
+            return Err(StepFailure::Finished {
+                steps: self.load_steps(),
+            });
+        }
+        let step = self.state.step + 1;
+        let lambda0 = self.state.step as f64 / self.load_steps() as f64;
+        let lambda1 = step as f64 / self.load_steps() as f64;
+        let start = Instant::now();
+        let mut timings = Timings::default();
+
+        // 1-2. Map points to the grid and assemble.
+        let map = Mapping::build(
+            &self.model.grid,
+            &self.state.points,
+            &self.model.bodies,
+            &self.model.dirichlet,
+            lambda1 - lambda0,
+        );
+        let d_of = |p: usize| self.model.materials[self.model.bodies[self.state.points.body[p]].material].d_matrix();
+        let (k, coupling) = map.pattern().assemble(&map, &self.state.points, &d_of);
+        let forces = self.nodal_forces(&map);
+        let rhs: Vec<f64> = (0..map.dofs.n_free)
+            .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
+            .collect();
+        let residual_norm = norm(&rhs);
+        timings.assembly = start.elapsed().as_secs_f64();
+
+        // 3. Factorise.
+        let t = Instant::now();
+        let factor = linalg::cholesky(&k).map_err(|e| StepFailure::Singular {
+            step,
+            reason: e.to_string(),
+        })?;
+        timings.factorisation = t.elapsed().as_secs_f64();
+
+        // 4. Solve and check the residual.
+        let t = Instant::now();
+        let du = linalg::solve(&factor, &rhs);
+        let kdu = linalg::sym_lower_mul(&k, &du);
+        let lin: Vec<f64> = kdu.iter().zip(&rhs).map(|(a, b)| a - b).collect();
+        let rel = if residual_norm > 0.0 {
+            norm(&lin) / residual_norm
+        } else {
+            norm(&lin)
+        };
+        let residuals = vec![if residual_norm > 0.0 { 1.0 } else { 0.0 }, rel];
+        timings.solve = t.elapsed().as_secs_f64();
+        if !residual_norm.is_finite() || !rel.is_finite() || du.iter().any(|v| !v.is_finite()) {
+            return Err(StepFailure::NonFinite {
+                step,
+                what: "residual or displacement increment".into(),
+                residuals,
+            });
+        }
+        if rel > self.params.tolerance {
+            return Err(StepFailure::NotConverged {
+                step,
+                residuals,
+                tolerance: self.params.tolerance,
+            });
+        }
+
+        // Condition number of the reduced stiffness.
+        let t = Instant::now();
+        let condition = match self.params.condition {
+            ConditionMode::Off => None,
+            ConditionMode::Auto => Some(linalg::condition(&k, &factor, self.params.dense_limit)),
+            ConditionMode::Dense => Some(linalg::condition(&k, &factor, usize::MAX)),
+            ConditionMode::Lanczos => Some(linalg::condition(&k, &factor, 0)),
+        };
+        timings.condition = t.elapsed().as_secs_f64();
+
+        // 5. Update the points.
+        let t = Instant::now();
+        let nodal = nodal_increments(&map, &du);
+        let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
+        let (points, fint_fixed_new) = self.updated_points(&map, &nodal);
+        if let Some(p) =
+            (0..points.len()).find(|&p| !points.stress[p].iter().chain(&points.x[p]).all(|v| v.is_finite()))
+        {
+            return Err(StepFailure::NonFinite {
+                step,
+                what: format!("stress or position at point {p}"),
+                residuals,
+            });
+        }
+        // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
+        let mut work = 0.0;
+        for i in 0..map.dofs.n_free {
+            work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * du[i];
+        }
+        for (c, &(_, _, u)) in map.dofs.constrained.iter().enumerate() {
+            work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * u;
+        }
+        let strain_energy: f64 = (0..points.len())
+            .map(|p| {
+                let (s, e) = (points.stress[p], points.strain[p]);
+                0.5 * (s[0] * e[0] + s[1] * e[1] + s[2] * e[2]) * self.state.points.vol[p]
+            })
+            .sum();
+        timings.update = t.elapsed().as_secs_f64();
+
+        // Commit.
+        self.state.points = points;
+        self.state.step = step;
+        self.state.external_work += work;
+        self.state.active_cells = map.active_cells.clone();
+        let errors = match &self.model.exact {
+            Some(e) => e.errors(&self.state.points, lambda1),
+            None => Vec::new(),
+        };
+        timings.total = start.elapsed().as_secs_f64();
+        Ok(StepReport {
+            step,
+            load_steps: self.load_steps(),
+            load_factor: lambda1,
+            unknowns: map.dofs.n_free,
+            active_nodes: map.dofs.active_nodes,
+            active_cells: map.active_cells.len(),
+            residual_norm,
+            residuals,
+            timings,
+            energy: Energy {
+                strain: strain_energy,
+                external_work: self.state.external_work,
+            },
+            condition,
+            errors,
+            max_increment,
+        })
+    }
+
+    /// External force per unit load factor and internal force of the
+    /// current stresses, on the free dofs, and the internal force on the
+    /// prescribed ones.
+    fn nodal_forces(&self, map: &Mapping) -> Forces {
+        let pts = &self.state.points;
+        let mut f = Forces {
+            ext: vec![0.0; map.dofs.n_free],
+            int: vec![0.0; map.dofs.n_free],
+            int_fixed: vec![0.0; map.dofs.constrained.len()],
+        };
+        let g = self.model.gravity;
+        for p in 0..pts.len() {
+            if pts.vol[p] == 0.0 {
+                continue;
+            }
+            let s = pts.stress[p];
+            let v = pts.vol[p];
+            for (n, w, [dx, dy]) in map.stencils[p].iter() {
+                let fi = [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v];
+                let fe = [w * pts.mass[p] * g[0], w * pts.mass[p] * g[1]];
+                for c in 0..2 {
+                    match map.dofs.node_dof[n][c] {
+                        Dof::Free(i) => {
+                            f.ext[i] += fe[c];
+                            f.int[i] += fi[c];
+                        }
+                        Dof::Fixed(i) => f.int_fixed[i] += fi[c],
+                        Dof::Inactive => {}
+                    }
+                }
+            }
+        }
+        for load in &self.model.point_loads {
+            for (n, w, _) in map.stencils[load.point].iter() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                        f.ext[i] += w * load.force[c];
+                    }
+                }
+            }
+        }
+        f
+    }
+
+    /// Points after applying nodal increments, and the internal force of
+    /// the new stresses on the prescribed dofs (start-of-step geometry).
+    fn updated_points(&self, map: &Mapping, nodal: &[P2]) -> (Points, Vec<f64>) {
+        let mut pts = self.state.points.clone();
+        let mut fint_fixed = vec![0.0; map.dofs.constrained.len()];
+        for p in 0..pts.len() {
+            let st = &map.stencils[p];
+            let du = st.interpolate(|n| nodal[n]);
+            let g = st.gradient(|n| nodal[n]);
+            let de = [g[0][0], g[1][1], g[0][1] + g[1][0]];
+            let d = self.model.materials[self.model.bodies[pts.body[p]].material].d_matrix();
+            let ds = mul3(&d, de);
+            let v = pts.vol[p];
+            for k in 0..3 {
+                pts.stress[p][k] += ds[k];
+                pts.strain[p][k] += de[k];
+            }
+            if v > 0.0 {
+                let s = pts.stress[p];
+                for (n, _, [dx, dy]) in st.iter() {
+                    let fi = [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v];
+                    for c in 0..2 {
+                        if let Dof::Fixed(i) = map.dofs.node_dof[n][c] {
+                            fint_fixed[i] += fi[c];
+                        }
+                    }
+                }
+            }
+            pts.x[p] = [pts.x[p][0] + du[0], pts.x[p][1] + du[1]];
+            let det = (1.0 + g[0][0]) * (1.0 + g[1][1]) - g[0][1] * g[1][0];
+            pts.vol[p] *= det;
+            pts.lp[p] = [pts.lp[p][0] * (1.0 + g[0][0]), pts.lp[p][1] * (1.0 + g[1][1])];
+        }
+        (pts, fint_fixed)
+    }
+}
+
+struct Forces {
+    ext: Vec<f64>,
+    int: Vec<f64>,
+    int_fixed: Vec<f64>,
+}
+
+/// Increment of every grid node: solved values on free dofs, prescribed
+/// increments on fixed ones, zero elsewhere.
+fn nodal_increments(map: &Mapping, du: &[f64]) -> Vec<P2> {
+    map.dofs
+        .node_dof
+        .iter()
+        .map(|d| {
+            let mut u = [0.0; 2];
+            for c in 0..2 {
+                u[c] = match d[c] {
+                    Dof::Free(i) => du[i],
+                    Dof::Fixed(i) => map.dofs.constrained[i].2,
+                    Dof::Inactive => 0.0,
+                };
+            }
+            u
+        })
+        .collect()
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}

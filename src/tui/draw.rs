@@ -1,0 +1,223 @@
+//! Pure drawing: `draw(frame, &app)` renders the whole screen.
+
+use super::app::App;
+use crate::colormap;
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::canvas::{Canvas, Line as CLine, Points};
+use ratatui::widgets::{Block, Borders, Cell, Clear, Paragraph, Row, Table, Wrap};
+use ratatui::Frame;
+
+/// Number of colour bins used on the canvas.
+const BINS: usize = 8;
+
+pub fn draw(frame: &mut Frame, app: &App) {
+    let area = frame.area();
+    let [title, body, status] =
+        Layout::vertical([Constraint::Length(1), Constraint::Min(5), Constraint::Length(1)]).areas(area);
+    frame.render_widget(
+        Paragraph::new(Line::from(vec![
+            Span::styled(" mpmlab ", Style::new().add_modifier(Modifier::BOLD).bg(Color::Blue)),
+            Span::raw(format!(
+                " {}  | step {}/{}  load factor {:.3}  | {} points, grid {}x{} h={}",
+                app.scene_name,
+                app.view.step,
+                app.view.load_steps,
+                app.view.load_factor,
+                app.points,
+                app.grid.nx,
+                app.grid.ny,
+                app.grid.h
+            )),
+        ])),
+        title,
+    );
+    let [canvas, side] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
+    draw_canvas(frame, app, canvas);
+    let [last, table] = Layout::vertical([Constraint::Length(12), Constraint::Min(3)]).areas(side);
+    draw_last_step(frame, app, last);
+    draw_table(frame, app, table);
+    let keys = "space step · f field · ? help · q quit";
+    let rec = app
+        .recording
+        .as_deref()
+        .map(|r| format!("  rec: {r}"))
+        .unwrap_or_default();
+    frame.render_widget(
+        Paragraph::new(format!(" {keys}  | {}{rec}", app.status)).style(Style::new().fg(Color::Gray)),
+        status,
+    );
+    if app.show_help {
+        draw_help(frame, area);
+    }
+}
+
+fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
+    let g = &app.grid;
+    let max = g.max();
+    let (lo, hi) = colormap::range(app.view.values.iter().copied());
+    // Bin points by colour so each bin is one `Points` shape.
+    let mut bins: Vec<Vec<(f64, f64)>> = vec![Vec::new(); BINS];
+    for (x, v) in app.view.positions.iter().zip(&app.view.values) {
+        let t = ((v - lo) / (hi - lo)).clamp(0.0, 1.0);
+        let b = ((t * BINS as f64) as usize).min(BINS - 1);
+        bins[b].push((x[0], x[1]));
+    }
+    // Keep cells square: pad the shorter extent (terminal cells are ~1:2).
+    let (w, h) = (max[0] - g.origin[0], max[1] - g.origin[1]);
+    let inner = (
+        area.width.saturating_sub(2).max(1) as f64,
+        2.0 * area.height.saturating_sub(2).max(1) as f64,
+    );
+    let scale = (w / inner.0).max(h / inner.1);
+    let (cx, cy) = (0.5 * (g.origin[0] + max[0]), 0.5 * (g.origin[1] + max[1]));
+    let (hw, hh) = (0.5 * scale * inner.0, 0.5 * scale * inner.1);
+    let legend = format!(" {}: {:.3e} .. {:.3e} ", app.view.field.label(), lo, hi);
+    let canvas = Canvas::default()
+        .block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(" points ")
+                .title_bottom(legend),
+        )
+        .marker(Marker::Braille)
+        .x_bounds([cx - hw, cx + hw])
+        .y_bounds([cy - hh, cy + hh])
+        .paint(move |ctx| {
+            let grid_color = Color::DarkGray;
+            let dense = g.nx + g.ny > 400;
+            let step_i = if dense { g.nx.div_ceil(50).max(1) } else { 1 };
+            let step_j = if dense { g.ny.div_ceil(50).max(1) } else { 1 };
+            for i in (0..=g.nx).step_by(step_i).chain([g.nx]) {
+                let x = g.origin[0] + i as f64 * g.h;
+                ctx.draw(&CLine::new(x, g.origin[1], x, max[1], grid_color));
+            }
+            for j in (0..=g.ny).step_by(step_j).chain([g.ny]) {
+                let y = g.origin[1] + j as f64 * g.h;
+                ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
+            }
+            ctx.layer();
+            for (b, coords) in bins.iter().enumerate() {
+                if coords.is_empty() {
+                    continue;
+                }
+                let [r, gg, bb] = colormap::viridis((b as f64 + 0.5) / BINS as f64);
+                ctx.draw(&Points {
+                    coords,
+                    color: Color::Rgb(r, gg, bb),
+                });
+            }
+        });
+    frame.render_widget(canvas, area);
+}
+
+fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
+    let mut lines: Vec<Line> = Vec::new();
+    if let Some(f) = &app.failure {
+        lines.push(Line::styled(
+            format!("FAILED at step {}", f.step()),
+            Style::new().fg(Color::Red).add_modifier(Modifier::BOLD),
+        ));
+        lines.push(Line::raw(f.to_string()));
+    } else if app.busy {
+        lines.push(Line::styled(
+            format!("computing step {}...", app.view.step + 1),
+            Style::new().fg(Color::Yellow),
+        ));
+    }
+    match app.reports.last() {
+        None => lines.push(Line::raw("step 0: initial state (press space to step)")),
+        Some(r) => {
+            let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.2e}")).collect();
+            lines.push(Line::raw(format!(
+                "step {}/{}  load factor {:.3}  unknowns {}",
+                r.step, r.load_steps, r.load_factor, r.unknowns
+            )));
+            lines.push(Line::raw(format!(
+                "residuals [{}]  |r0| {:.3e} N",
+                res.join(", "),
+                r.residual_norm
+            )));
+            match &r.condition {
+                Some(c) => lines.push(Line::raw(format!(
+                    "cond(K) {:.3e} ({})  lambda {:.2e}..{:.2e}",
+                    c.value,
+                    c.method.label(),
+                    c.lambda_min,
+                    c.lambda_max
+                ))),
+                None => lines.push(Line::raw("cond(K) off")),
+            }
+            lines.push(Line::raw(format!(
+                "energy: strain {:.4e} J  work {:.4e} J",
+                r.energy.strain, r.energy.external_work
+            )));
+            let t = &r.timings;
+            lines.push(Line::raw(format!(
+                "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
+                t.assembly, t.factorisation, t.solve, t.condition
+            )));
+            if !r.errors.is_empty() {
+                let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
+                lines.push(Line::raw(format!("errors: {}", e.join("  "))));
+            }
+        }
+    }
+    frame.render_widget(
+        Paragraph::new(lines)
+            .wrap(Wrap { trim: true })
+            .block(Block::default().borders(Borders::ALL).title(" last step ")),
+        area,
+    );
+}
+
+fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
+    let header = Row::new(["step", "lambda", "unknowns", "residual", "cond(K)", "time s"])
+        .style(Style::new().add_modifier(Modifier::BOLD));
+    let visible = area.height.saturating_sub(3) as usize;
+    let skip = app.reports.len().saturating_sub(visible);
+    let rows = app.reports.iter().skip(skip).map(|r| {
+        Row::new([
+            Cell::from(r.step.to_string()),
+            Cell::from(format!("{:.3}", r.load_factor)),
+            Cell::from(r.unknowns.to_string()),
+            Cell::from(format!("{:.1e}", r.residuals.last().copied().unwrap_or(f64::NAN))),
+            Cell::from(r.condition.map_or("-".into(), |c| format!("{:.1e}", c.value))),
+            Cell::from(format!("{:.3}", r.timings.total)),
+        ])
+    });
+    let widths = [
+        Constraint::Length(5),
+        Constraint::Length(6),
+        Constraint::Length(8),
+        Constraint::Length(8),
+        Constraint::Length(8),
+        Constraint::Length(7),
+    ];
+    frame.render_widget(
+        Table::new(rows, widths)
+            .header(header)
+            .block(Block::default().borders(Borders::ALL).title(" steps ")),
+        area,
+    );
+}
+
+fn draw_help(frame: &mut Frame, area: Rect) {
+    let text = vec![
+        Line::raw("space   take one load step"),
+        Line::raw("f       colour points by the next field"),
+        Line::raw("?       show or hide this help"),
+        Line::raw("Esc     close this help"),
+        Line::raw("q       quit (the recording is closed cleanly)"),
+    ];
+    let w = 50.min(area.width);
+    let h = (text.len() as u16 + 2).min(area.height);
+    let r = Rect::new(area.x + (area.width - w) / 2, area.y + (area.height - h) / 2, w, h);
+    frame.render_widget(Clear, r);
+    frame.render_widget(
+        Paragraph::new(text).block(Block::default().borders(Borders::ALL).title(" keys ")),
+        r,
+    );
+}

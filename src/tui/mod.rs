@@ -1,0 +1,117 @@
+//! The terminal UI: the engine runs on its own thread, the UI thread draws
+//! and reads keys, and they talk over channels, so the screen stays
+//! responsive while a step computes.
+//!
+//! - [`app`]: state and actions (no terminal);
+//! - [`draw`]: pure rendering of an [`app::App`];
+//! - this module: the event loop and the engine thread.
+
+pub mod app;
+pub mod draw;
+
+use crate::field::Field;
+use crate::record::Recorder;
+use crate::simulation::Simulation;
+use app::{Action, App, Command, Update, View};
+use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind};
+use std::sync::mpsc;
+use std::time::Duration;
+
+/// Map a key to an action.
+pub fn action_for(code: KeyCode) -> Option<Action> {
+    match code {
+        KeyCode::Char(' ') => Some(Action::Step),
+        KeyCode::Char('?') => Some(Action::ToggleHelp),
+        KeyCode::Char('f') => Some(Action::NextField),
+        KeyCode::Esc => Some(Action::CloseOverlay),
+        KeyCode::Char('q') => Some(Action::Quit),
+        _ => None,
+    }
+}
+
+/// The engine thread: steps the simulation, records, reports back.
+fn engine(
+    mut sim: Simulation,
+    mut recorder: Option<Recorder>,
+    commands: mpsc::Receiver<Command>,
+    updates: mpsc::Sender<Update>,
+) {
+    let mut field = Field::SigmaYy;
+    let warn = |updates: &mpsc::Sender<Update>, r: Result<(), crate::record::RecordError>| {
+        if let Err(e) = r {
+            let _ = updates.send(Update::Message(format!("recording stopped: {e}")));
+            return false;
+        }
+        true
+    };
+    while let Ok(cmd) = commands.recv() {
+        match cmd {
+            Command::Step => match sim.step() {
+                Ok(report) => {
+                    if let Some(rec) = recorder.as_mut() {
+                        let r = rec.log_step(&report, &sim);
+                        if !warn(&updates, r) {
+                            recorder = None;
+                        }
+                    }
+                    let _ = updates.send(Update::Stepped(Box::new(report), Box::new(View::of(&sim, field))));
+                }
+                Err(failure) => {
+                    if let Some(rec) = recorder.as_mut() {
+                        let r = rec.log_failure(&failure);
+                        if !warn(&updates, r) {
+                            recorder = None;
+                        }
+                    }
+                    let _ = updates.send(Update::Failed(failure));
+                }
+            },
+            Command::SetField(f) => {
+                field = f;
+                let _ = updates.send(Update::View(Box::new(View::of(&sim, field))));
+            }
+            Command::Quit => break,
+        }
+    }
+    if let Some(rec) = recorder {
+        let _ = rec.event("end of interactive session", "INFO");
+        let _ = rec.finish();
+    }
+}
+
+/// Run the TUI on a simulation until the user quits. `recorder` receives
+/// every step. The terminal is restored on exit and on panic.
+pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
+    let mut app = App::new(&sim, recorder.as_ref().map(|r| r.path().display().to_string()));
+    let (cmd_tx, cmd_rx) = mpsc::channel();
+    let (up_tx, up_rx) = mpsc::channel();
+    let worker = std::thread::Builder::new()
+        .name("mpmlab-engine".into())
+        .spawn(move || engine(sim, recorder, cmd_rx, up_tx))?;
+    // ratatui::init installs a panic hook that restores the terminal.
+    let mut terminal = ratatui::init();
+    let result = (|| -> std::io::Result<()> {
+        while !app.quit {
+            while let Ok(u) = up_rx.try_recv() {
+                app.update(u);
+            }
+            terminal.draw(|f| draw::draw(f, &app))?;
+            if event::poll(Duration::from_millis(50))? {
+                if let Event::Key(k) = event::read()? {
+                    if k.kind == KeyEventKind::Press {
+                        if let Some(cmd) = action_for(k.code).and_then(|a| app.apply(a)) {
+                            let _ = cmd_tx.send(cmd);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    })();
+    ratatui::restore();
+    // Let the engine finish its step and close the recording.
+    let _ = cmd_tx.send(Command::Quit);
+    drop(cmd_tx);
+    let _ = worker.join();
+    result
+}

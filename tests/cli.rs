@@ -1,0 +1,143 @@
+//! The command line as a user meets it: bad scenes are reported with file,
+//! line and field; every shipped scene runs.
+
+mod common;
+use common::temp_path;
+use std::process::Command;
+
+fn mpmlab(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The patch scene with `from` replaced by `to`, written to a temp file.
+fn broken(from: &str, to: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(common::scene_path("patch-compression")).unwrap();
+    assert!(text.contains(from), "{from}");
+    let path = temp_path("broken", "toml");
+    std::fs::write(&path, text.replacen(from, to, 1)).unwrap();
+    path
+}
+
+fn line_of(path: &std::path::Path, needle: &str) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .position(|l| l.contains(needle))
+        .unwrap()
+        + 1
+}
+
+#[test]
+fn malformed_scene_names_file_and_line() {
+    let p = broken("h = 0.5", "h = 0.5 0.5");
+    let (code, _, err) = mpmlab(&["run", p.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    let line = line_of(&p, "h = 0.5 0.5");
+    assert!(err.contains(&format!("{}:{line}:", p.display())), "{err}");
+}
+
+#[test]
+fn unknown_key_is_named() {
+    let p = broken("nu = 0.3", "nu = 0.3\nyoung = 5.0");
+    let (code, _, err) = mpmlab(&["check", p.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    let line = line_of(&p, "young = 5.0");
+    assert!(err.contains(&format!(":{line}:")) && err.contains("young"), "{err}");
+}
+
+#[test]
+fn bad_values_are_located() {
+    for (from, to, field) in [
+        ("E = 1.0e6", "E = -1.0e6", "material[0].E"),
+        ("nu = 0.3", "nu = 0.5", "material[0].nu"),
+        ("max = [2.25, 2.0]", "max = [4.25, 2.0]", "body[0].region"),
+        ("h = 0.5", "h = 0.7", "grid.size"),
+        ("material = \"elastic\"", "material = \"steel\"", "body[0].material"),
+        ("load_steps = 1", "load_steps = 0", "analysis.load_steps"),
+        ("y = 2.0", "y = 2.1", "dirichlet[2].y"),
+    ] {
+        let p = broken(from, to);
+        let (code, _, err) = mpmlab(&["check", p.to_str().unwrap()]);
+        assert_eq!(code, 2, "{to}: {err}");
+        let line = line_of(&p, to);
+        // Field errors point at the key of the offending field, or at the
+        // table that holds it for whole-table checks.
+        assert!(err.contains(&format!("field `{field}`")), "{to}: {err}");
+        if field != "grid.size" && field != "body[0].region" {
+            assert!(
+                err.contains(&format!("{}:{line}:", p.display())),
+                "{to}: expected line {line}: {err}"
+            );
+        }
+    }
+}
+
+#[test]
+fn every_shipped_scene_runs() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
+    let mut n = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let p = entry.unwrap().path();
+        if p.extension().is_some_and(|e| e == "toml") {
+            let (code, out, err) = mpmlab(&["run", "--quiet", p.to_str().unwrap()]);
+            assert_eq!(code, 0, "{}: {out}{err}", p.display());
+            assert!(out.contains("summary:"), "{out}");
+            n += 1;
+        }
+    }
+    assert!(n >= 3);
+}
+
+#[test]
+fn list_and_check() {
+    let (code, out, _) = mpmlab(&["list"]);
+    assert_eq!(code, 0);
+    for name in ["column-small-strain", "patch-compression", "fe-equivalence"] {
+        assert!(out.contains(name), "{out}");
+    }
+    let (code, out, _) = mpmlab(&["check", "scenarios/column-small-strain.toml"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("ok"));
+}
+
+#[test]
+fn run_prints_a_table_and_records() {
+    let rrd = temp_path("cli", "rrd");
+    let (code, out, err) = mpmlab(&[
+        "run",
+        "scenarios/column-small-strain.toml",
+        "--record",
+        rrd.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("residual") && out.contains("syy_normalised") && out.contains("summary:"),
+        "{out}"
+    );
+    assert!(std::fs::metadata(&rrd).unwrap().len() > 1000);
+    let _ = std::fs::remove_file(rrd);
+}
+
+#[test]
+fn unwritable_recording_is_a_clear_error() {
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--record",
+        "/nonexistent-dir/x.rrd",
+    ]);
+    assert_eq!(code, 3);
+    assert!(
+        err.contains("/nonexistent-dir") && err.contains("does not exist"),
+        "{err}"
+    );
+}

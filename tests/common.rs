@@ -1,0 +1,48 @@
+//! Helpers shared by the integration tests (included with `mod common;`).
+#![allow(dead_code)]
+
+use mpmlab::scene::Scene;
+use mpmlab::{Model, Simulation, StepReport};
+use std::path::PathBuf;
+
+/// Path of a shipped scene.
+pub fn scene_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("scenarios")
+        .join(format!("{name}.toml"))
+}
+
+/// Parse a shipped scene, let `edit` change it, build and return the simulation.
+pub fn sim_with(name: &str, edit: impl FnOnce(&mut Scene)) -> Simulation {
+    let path = scene_path(name);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut scene = Scene::parse(&text, name).unwrap();
+    edit(&mut scene);
+    Simulation::new(Model::build(&scene, &text, name).unwrap())
+}
+
+/// Run every load step, panicking on failure.
+pub fn run_all(sim: &mut Simulation) -> StepReport {
+    let mut last = None;
+    while !sim.finished() {
+        last = Some(sim.step().unwrap_or_else(|f| panic!("{f}")));
+    }
+    last.unwrap()
+}
+
+pub fn error(r: &StepReport, name: &str) -> f64 {
+    r.errors
+        .iter()
+        .find(|e| e.name == name)
+        .unwrap_or_else(|| panic!("no error `{name}`"))
+        .value
+}
+
+/// A unique temporary file path.
+pub fn temp_path(stem: &str, ext: &str) -> PathBuf {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    std::env::temp_dir().join(format!("mpmlab-{stem}-{}-{nanos}.{ext}", std::process::id()))
+}

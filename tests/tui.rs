@@ -1,0 +1,65 @@
+//! The TUI's first screen and a screen after a step, rendered with
+//! ratatui's TestBackend.
+
+mod common;
+use common::sim_with;
+use mpmlab::tui::app::{Action, App, Command, Update, View};
+use mpmlab::tui::draw::draw;
+use ratatui::backend::TestBackend;
+use ratatui::Terminal;
+
+fn screen(app: &App) -> Vec<String> {
+    let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+    t.draw(|f| draw(f, app)).unwrap();
+    let buf = t.backend().buffer().clone();
+    (0..buf.area.height)
+        .map(|y| (0..buf.area.width).map(|x| buf[(x, y)].symbol().to_string()).collect())
+        .collect()
+}
+
+fn braille(line: &str) -> usize {
+    line.chars().filter(|c| ('\u{2801}'..='\u{28ff}').contains(c)).count()
+}
+
+#[test]
+fn first_screen_shows_grid_points_and_step_zero() {
+    let sim = sim_with("column-small-strain", |_| {});
+    let app = App::new(&sim, None);
+    let lines = screen(&app);
+    let all = lines.join("\n");
+    assert!(
+        lines[0].contains("column-small-strain") && lines[0].contains("step 0/1"),
+        "{}",
+        lines[0]
+    );
+    assert!(all.contains(" points ") && all.contains(" steps ") && all.contains(" last step "));
+    assert!(all.contains("step 0: initial state"));
+    assert!(all.contains("space step") && all.contains("q quit"));
+    // The canvas (left 50 columns) is drawn with braille dots: grid lines
+    // and points fill many cells.
+    let dots: usize = lines[1..29]
+        .iter()
+        .map(|l| braille(&l.chars().take(50).collect::<String>()))
+        .sum();
+    assert!(dots > 100, "{all}");
+}
+
+#[test]
+fn a_step_updates_the_screen() {
+    let mut sim = sim_with("column-small-strain", |_| {});
+    let mut app = App::new(&sim, None);
+    assert_eq!(app.apply(Action::Step), Some(Command::Step));
+    assert!(app.busy);
+    // A second press while busy does not queue another step.
+    assert_eq!(app.apply(Action::Step), None);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    let all = screen(&app).join("\n");
+    assert!(all.contains("step 1/1"), "{all}");
+    assert!(all.contains("cond(K)") && all.contains("dense"), "{all}");
+    assert!(all.contains("syy_normalised"), "{all}");
+    // Finished: space does nothing more.
+    assert_eq!(app.apply(Action::Step), None);
+    app.apply(Action::ToggleHelp);
+    assert!(screen(&app).join("\n").contains("take one load step"));
+}
