@@ -25,19 +25,34 @@ pub fn viridis(t: f64) -> [u8; 3] {
     [0, 1, 2].map(|i| (a[i] as f64 + f * (b[i] as f64 - a[i] as f64)).round() as u8)
 }
 
-/// Range `[min, max]` of finite values (a unit range around a constant).
+/// Range `(min, max)` of the finite values; `(0, 0)` when there are none.
+/// The two are equal for a constant field.
 pub fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite()) {
         lo = lo.min(v);
         hi = hi.max(v);
     }
-    if !lo.is_finite() {
-        return (0.0, 1.0);
-    }
-    if hi - lo <= 1e-12 * hi.abs().max(lo.abs()) {
-        let d = lo.abs().max(1e-300) * 1e-3;
-        return (lo - d, hi + d);
+    if lo > hi {
+        return (0.0, 0.0);
     }
     (lo, hi)
+}
+
+/// Position of `v` in `[lo, hi]` as a number in [0, 1] (0.5 for a constant field).
+pub fn unit(v: f64, lo: f64, hi: f64) -> f64 {
+    if hi > lo {
+        ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
+    } else {
+        0.5
+    }
+}
+
+/// Legend text for a field's range.
+pub fn legend(label: &str, lo: f64, hi: f64) -> String {
+    if hi > lo {
+        format!("{label}: {lo:.3e} .. {hi:.3e}")
+    } else {
+        format!("{label}: uniform {lo:.3e}")
+    }
 }

@@ -143,7 +143,7 @@ impl Recorder {
         let colors: Vec<rerun::Color> = values
             .iter()
             .map(|&v| {
-                let [r, g, b] = colormap::viridis((v - lo) / (hi - lo));
+                let [r, g, b] = colormap::viridis(colormap::unit(v, lo, hi));
                 rerun::Color::from_rgb(r, g, b)
             })
             .collect();

@@ -61,7 +61,7 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
     // Bin points by colour so each bin is one `Points` shape.
     let mut bins: Vec<Vec<(f64, f64)>> = vec![Vec::new(); BINS];
     for (x, v) in app.view.positions.iter().zip(&app.view.values) {
-        let t = ((v - lo) / (hi - lo)).clamp(0.0, 1.0);
+        let t = colormap::unit(*v, lo, hi);
         let b = ((t * BINS as f64) as usize).min(BINS - 1);
         bins[b].push((x[0], x[1]));
     }
@@ -74,7 +74,7 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
     let scale = (w / inner.0).max(h / inner.1);
     let (cx, cy) = (0.5 * (g.origin[0] + max[0]), 0.5 * (g.origin[1] + max[1]));
     let (hw, hh) = (0.5 * scale * inner.0, 0.5 * scale * inner.1);
-    let legend = format!(" {}: {:.3e} .. {:.3e} ", app.view.field.label(), lo, hi);
+    let legend = format!(" {} ", colormap::legend(app.view.field.label(), lo, hi));
     let canvas = Canvas::default()
         .block(
             Block::default()

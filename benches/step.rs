@@ -1,0 +1,89 @@
+//! Timing of assembly, factorisation and solve for a scene of about 100,000
+//! unknowns: a 224 x 224 cell block (2x2 points per cell, 200,704 points)
+//! under self-weight on rollers.
+//!
+//! `cargo bench --bench step`
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use mpmlab::assembly::Mapping;
+use mpmlab::linalg;
+use mpmlab::scene::ConditionMode;
+use mpmlab::{Model, Simulation};
+
+const N: usize = 224;
+
+fn scene() -> String {
+    format!(
+        r#"
+[scene]
+name = "bench-block"
+[grid]
+origin = [0.0, 0.0]
+size = [{n}.0, {n}.0]
+h = 1.0
+[[material]]
+name = "m"
+E = 1.0e7
+nu = 0.3
+density = 1000.0
+[[body]]
+name = "block"
+material = "m"
+points_per_cell = 2
+region = {{ shape = "rectangle", min = [0.0, 0.0], max = [{n}.0, {n}.0] }}
+[[dirichlet]]
+kind = "roller"
+x = 0.0
+[[dirichlet]]
+kind = "roller"
+x = {n}.0
+[[dirichlet]]
+kind = "roller"
+y = 0.0
+[loads]
+gravity = [0.0, -10.0]
+[analysis]
+load_steps = 1000
+condition = "off"
+"#,
+        n = N
+    )
+}
+
+fn bench(c: &mut Criterion) {
+    let model = Model::from_text(&scene(), "bench.toml").expect("bench scene");
+    let d = model.materials[0].d_matrix();
+    let d_of = |_p: usize| d;
+    let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
+    println!("unknowns: {}, points: {}", map.dofs.n_free, model.points.len());
+    let mut g = c.benchmark_group("step-100k");
+    g.sample_size(10);
+    g.bench_function("map points to grid", |b| {
+        b.iter(|| Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0))
+    });
+    g.bench_function("pattern", |b| b.iter(|| map.pattern()));
+    let pattern = map.pattern();
+    g.bench_function("assemble stiffness", |b| {
+        b.iter(|| pattern.assemble(&map, &model.points, &d_of))
+    });
+    let (k, _) = pattern.assemble(&map, &model.points, &d_of);
+    g.bench_function("cholesky (symbolic + numeric)", |b| {
+        b.iter(|| linalg::cholesky(&k).unwrap())
+    });
+    let factor = linalg::cholesky(&k).unwrap();
+    let rhs = vec![1.0; map.dofs.n_free];
+    g.bench_function("solve", |b| b.iter(|| linalg::solve(&factor, &rhs)));
+    g.bench_function("whole step (condition off)", |b| {
+        let mut sim = Simulation::new(model.clone());
+        assert_eq!(sim.params().condition, ConditionMode::Off);
+        let snap = sim.snapshot();
+        b.iter(|| {
+            sim.restore(&snap);
+            sim.step().unwrap()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
