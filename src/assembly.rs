@@ -10,7 +10,7 @@
 
 use crate::basis::{stencil, Stencil};
 use crate::grid::Grid;
-use crate::model::{Body, DirichletLine};
+use crate::model::{Body, GridDirichlet, GridTarget};
 use crate::points::Points;
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use std::collections::BTreeMap;
@@ -71,7 +71,7 @@ impl Mapping {
     /// Map the points (at their current positions) to the grid and number
     /// the dofs; prescribed components get `value * dlambda` as this step's
     /// increment.
-    pub fn build(grid: &Grid, pts: &Points, bodies: &[Body], dirichlet: &[DirichletLine], dlambda: f64) -> Mapping {
+    pub fn build(grid: &Grid, pts: &Points, bodies: &[Body], dirichlet: &[GridDirichlet], dlambda: f64) -> Mapping {
         let stencils: Vec<Stencil> = (0..pts.len())
             .map(|p| stencil(grid, bodies[pts.body[p]].basis, pts.x[p], pts.lp[p]))
             .collect();
@@ -108,13 +108,12 @@ impl Mapping {
         // Prescribed components: later conditions override earlier ones.
         let mut prescribed: Vec<[Option<f64>; 2]> = vec![[None, None]; grid.num_nodes()];
         for d in dirichlet {
-            let count = if d.axis == 0 { grid.ny + 1 } else { grid.nx + 1 };
-            for k in 0..count {
-                let n = if d.axis == 0 {
-                    grid.node(d.index, k)
-                } else {
-                    grid.node(k, d.index)
-                };
+            let nodes: Vec<usize> = match d.target {
+                GridTarget::Line { axis: 0, index } => (0..=grid.ny).map(|k| grid.node(index, k)).collect(),
+                GridTarget::Line { index, .. } => (0..=grid.nx).map(|k| grid.node(k, index)).collect(),
+                GridTarget::Node(n) => vec![n],
+            };
+            for n in nodes {
                 for c in 0..2 {
                     if let Some(v) = d.value[c] {
                         prescribed[n][c] = Some(v * dlambda);

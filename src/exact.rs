@@ -29,6 +29,51 @@ pub enum ExactSolution {
         anchor: P2,
         material: LinearElastic,
     },
+    /// Uniform `s_yy = stress_yy` with `u_x = 0`: `s_xx = nu/(1-nu) s_yy`
+    /// (plane strain) or `nu s_yy` (plane stress), `u_y = s_yy/M (Y - base)`.
+    ConfinedY {
+        stress_yy: f64,
+        base: f64,
+        material: LinearElastic,
+    },
+    /// Lame's thick cylinder under internal pressure `p`:
+    /// `s_rr = A - B/r^2`, `s_tt = A + B/r^2`, `A = p a^2/(b^2 - a^2)`,
+    /// `B = p a^2 b^2/(b^2 - a^2)`; plane strain
+    /// `u_r = (1+nu)/E ((1-2nu) A r + B/r)`, plane stress `u_r = ((1-nu) A r + (1+nu) B/r)/E`.
+    Lame {
+        p: f64,
+        a: f64,
+        b: f64,
+        center: P2,
+        material: LinearElastic,
+    },
+    /// Kirsch: infinite plate, hole of radius `a` at the origin, remote
+    /// `s_xx = s` (B (42)-(46)).
+    Kirsch { s: f64, a: f64, material: LinearElastic },
+}
+
+/// The constrained modulus `s_yy / e_yy` with `e_xx = 0`.
+fn constrained_modulus(m: &LinearElastic) -> f64 {
+    match m.plane {
+        Plane::Strain => m.e * (1.0 - m.nu) / ((1.0 + m.nu) * (1.0 - 2.0 * m.nu)),
+        Plane::Stress => m.e / (1.0 - m.nu * m.nu),
+    }
+}
+
+/// `nu/(1-nu)` in plane strain, `nu` in plane stress: `s_xx / s_yy` with `e_xx = 0`.
+fn lateral_ratio(m: &LinearElastic) -> f64 {
+    match m.plane {
+        Plane::Strain => m.nu / (1.0 - m.nu),
+        Plane::Stress => m.nu,
+    }
+}
+
+/// Kolosov constant.
+fn kappa(m: &LinearElastic) -> f64 {
+    match m.plane {
+        Plane::Strain => 3.0 - 4.0 * m.nu,
+        Plane::Stress => (3.0 - m.nu) / (1.0 + m.nu),
+    }
 }
 
 /// One error measure: a name (e.g. `stress_l2`) and its value.
@@ -43,6 +88,9 @@ impl ExactSolution {
         match self {
             ExactSolution::ColumnSelfWeight { .. } => "column-self-weight",
             ExactSolution::UniaxialY { .. } => "uniaxial-y",
+            ExactSolution::ConfinedY { .. } => "confined-y",
+            ExactSolution::Lame { .. } => "lame",
+            ExactSolution::Kirsch { .. } => "kirsch",
         }
     }
 
@@ -53,11 +101,7 @@ impl ExactSolution {
                 rho_g, top, material, ..
             } => {
                 let syy = -rho_g * (top - x[1]);
-                let sxx = match material.plane {
-                    Plane::Strain => material.nu / (1.0 - material.nu) * syy,
-                    Plane::Stress => material.nu * syy,
-                };
-                [sxx, syy, 0.0]
+                [lateral_ratio(material) * syy, syy, 0.0]
             }
             ExactSolution::UniaxialY {
                 strain_yy, material, ..
@@ -67,6 +111,33 @@ impl ExactSolution {
                     Plane::Stress => material.e,
                 };
                 [0.0, m * strain_yy, 0.0]
+            }
+            ExactSolution::ConfinedY {
+                stress_yy, material, ..
+            } => [lateral_ratio(material) * stress_yy, *stress_yy, 0.0],
+            ExactSolution::Lame { p, a, b, center, .. } => {
+                let (dx, dy) = (x[0] - center[0], x[1] - center[1]);
+                let r2 = dx * dx + dy * dy;
+                let big_a = p * a * a / (b * b - a * a);
+                let big_b = big_a * b * b;
+                let (srr, stt) = (big_a - big_b / r2, big_a + big_b / r2);
+                let (c, s) = (dx / r2.sqrt(), dy / r2.sqrt());
+                [
+                    srr * c * c + stt * s * s,
+                    srr * s * s + stt * c * c,
+                    (srr - stt) * s * c,
+                ]
+            }
+            ExactSolution::Kirsch { s, a, .. } => {
+                let r2 = x[0] * x[0] + x[1] * x[1];
+                let th = x[1].atan2(x[0]);
+                let (a2, a4) = (a * a / r2, a.powi(4) / (r2 * r2));
+                let (c2, c4, s2, s4) = ((2.0 * th).cos(), (4.0 * th).cos(), (2.0 * th).sin(), (4.0 * th).sin());
+                [
+                    s * (1.0 - a2 * (1.5 * c2 + c4) + 1.5 * a4 * c4),
+                    s * (-a2 * (0.5 * c2 - c4) - 1.5 * a4 * c4),
+                    s * (-a2 * (0.5 * s2 + s4) + 1.5 * a4 * s4),
+                ]
             }
         }
     }
@@ -80,10 +151,7 @@ impl ExactSolution {
                 top,
                 material: m,
             } => {
-                let modulus = match m.plane {
-                    Plane::Strain => m.e * (1.0 - m.nu) / ((1.0 + m.nu) * (1.0 - 2.0 * m.nu)),
-                    Plane::Stress => m.e / (1.0 - m.nu * m.nu),
-                };
+                let modulus = constrained_modulus(m);
                 let y = x[1];
                 [0.0, -rho_g / modulus * (top * (y - base) - 0.5 * (y * y - base * base))]
             }
@@ -97,6 +165,42 @@ impl ExactSolution {
                     Plane::Stress => -m.nu * strain_yy,
                 };
                 [exx * (x[0] - anchor[0]), strain_yy * (x[1] - anchor[1])]
+            }
+            ExactSolution::ConfinedY {
+                stress_yy,
+                base,
+                material,
+            } => [0.0, stress_yy / constrained_modulus(material) * (x[1] - base)],
+            ExactSolution::Lame {
+                p,
+                a,
+                b,
+                center,
+                material: m,
+            } => {
+                let (dx, dy) = (x[0] - center[0], x[1] - center[1]);
+                let r = dx.hypot(dy);
+                let big_a = p * a * a / (b * b - a * a);
+                let big_b = big_a * b * b;
+                let ur = match m.plane {
+                    Plane::Strain => (1.0 + m.nu) / m.e * ((1.0 - 2.0 * m.nu) * big_a * r + big_b / r),
+                    Plane::Stress => ((1.0 - m.nu) * big_a * r + (1.0 + m.nu) * big_b / r) / m.e,
+                };
+                [ur * dx / r, ur * dy / r]
+            }
+            ExactSolution::Kirsch { s, a, material: m } => {
+                let r = x[0].hypot(x[1]);
+                let th = x[1].atan2(x[0]);
+                let mu = m.e / (2.0 * (1.0 + m.nu));
+                let k = kappa(m);
+                let c = a * s / (8.0 * mu);
+                let (ar, ar3) = (a / r, (a / r).powi(3));
+                [
+                    c * (r / a * (k + 1.0) * th.cos() + 2.0 * ar * ((1.0 + k) * th.cos() + (3.0 * th).cos())
+                        - 2.0 * ar3 * (3.0 * th).cos()),
+                    c * (r / a * (k - 3.0) * th.sin() + 2.0 * ar * ((1.0 - k) * th.sin() + (3.0 * th).sin())
+                        - 2.0 * ar3 * (3.0 * th).sin()),
+                ]
             }
         }
     }

@@ -103,6 +103,28 @@ fn cross(o: P2, a: P2, b: P2) -> f64 {
     (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 }
 
+/// The polygon without vertices that lie on the line through their
+/// neighbours (they add nothing and stall ear clipping).
+pub fn drop_collinear(poly: &[P2]) -> Vec<P2> {
+    let scale = poly
+        .iter()
+        .fold(0.0f64, |m, p| m.max(p[0].abs()).max(p[1].abs()))
+        .max(1e-300);
+    let mut out: Vec<P2> = poly.to_vec();
+    let mut k = 0;
+    while out.len() > 3 && k < out.len() {
+        let n = out.len();
+        let (a, b, c) = (out[(k + n - 1) % n], out[k], out[(k + 1) % n]);
+        if cross(a, b, c).abs() <= 1e-14 * scale * scale {
+            out.remove(k);
+            k = k.saturating_sub(1);
+        } else {
+            k += 1;
+        }
+    }
+    out
+}
+
 /// Is the counter-clockwise polygon convex?
 pub fn is_convex(poly: &[P2]) -> bool {
     let n = poly.len();

@@ -20,6 +20,7 @@
 
 pub mod assembly;
 pub mod basis;
+pub mod boundary;
 pub mod colormap;
 pub mod exact;
 pub mod field;

@@ -10,6 +10,15 @@ use mpmlab::Model;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+/// `println!` that ignores a closed stdout (e.g. `mpmlab run ... | head`)
+/// instead of panicking.
+macro_rules! out {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
 /// The scene opened by `mpmlab` with no arguments (also built in, so the
 /// command works from any directory).
 const DEFAULT_SCENE: &str = "scenarios/column-small-strain.toml";
@@ -94,7 +103,7 @@ fn check(path: &Path) -> Result<ExitCode> {
         Err(code) => return Ok(code),
     };
     let m = sim.model();
-    println!(
+    out!(
         "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps",
         path.display(),
         m.name,
@@ -123,9 +132,9 @@ fn list(dir: &Path) -> Result<ExitCode> {
         {
             Ok(s) => {
                 let desc = s.scene.description.split_whitespace().collect::<Vec<_>>().join(" ");
-                println!("{:<28} {}", s.scene.name, desc);
+                out!("{:<28} {}", s.scene.name, desc);
             }
-            Err(e) => println!("{:<28} (invalid: {e})", file),
+            Err(e) => out!("{:<28} (invalid: {e})", file),
         }
     }
     Ok(ExitCode::SUCCESS)
@@ -188,7 +197,7 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
         None => None,
     };
     let m = sim.model();
-    println!(
+    out!(
         "scene `{}`: grid {}x{} h={}, {} points, {} load steps",
         m.name,
         m.grid.nx,
@@ -205,9 +214,9 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
             Ok(r) => {
                 if !quiet {
                     if last.is_none() {
-                        println!("{}", header(Some(&r)));
+                        out!("{}", header(Some(&r)));
                     }
-                    println!("{}", row(&r));
+                    out!("{}", row(&r));
                 }
                 total_time += r.timings.total;
                 if let Some(rec) = recorder.as_mut() {
@@ -235,7 +244,7 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
             .iter()
             .map(|e| format!("{} = {:.4e}", e.name, e.value))
             .collect();
-        println!(
+        out!(
             "summary: {}/{} steps, {:.3} s in steps, final strain energy {:.6e} J, work {:.6e} J{}{}",
             sim.step_index(),
             sim.load_steps(),
@@ -254,6 +263,21 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
             }
         );
     }
+    if let Some(r) = &last {
+        for b in &r.boundaries {
+            out!(
+                "boundary `{}` (start of step {}): length {:.6} m{}, {} cells cut, traction resultant ({:.6e}, {:.6e}) N{}",
+                b.name,
+                r.step,
+                b.length,
+                b.area.map_or(String::new(), |a| format!(", area {a:.6} m^2")),
+                b.cells_cut,
+                b.resultant[0],
+                b.resultant[1],
+                if b.lost > 0.0 { format!(", LOST {:.3e} N on inactive nodes", b.lost) } else { String::new() }
+            );
+        }
+    }
     if let Some(rec) = recorder {
         let p = rec.path().display().to_string();
         let _ = rec.event(
@@ -265,7 +289,7 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
             "INFO",
         );
         match rec.finish() {
-            Ok(()) => println!("recording: {p}  (replay: rerun {p})"),
+            Ok(()) => out!("recording: {p}  (replay: rerun {p})"),
             Err(e) => {
                 eprintln!("error: {e}");
                 code = ExitCode::from(3);
@@ -335,7 +359,7 @@ fn tui(scene: Option<&Path>, record: Option<PathBuf>, no_record: bool) -> Result
     let path = recorder.as_ref().map(|r| r.path().display().to_string());
     mpmlab::tui::run(sim, recorder).context("terminal UI")?;
     if let Some(p) = path {
-        println!("recording: {p}  (replay: rerun {p})");
+        out!("recording: {p}  (replay: rerun {p})");
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -2,6 +2,8 @@
 //! their material points, boundary conditions, loads and analysis settings.
 
 use crate::basis::BasisKind;
+use crate::boundary::bspline::BSpline;
+use crate::boundary::{Boundary, Traction};
 use crate::exact::ExactSolution;
 use crate::geometry::{Region, P2};
 use crate::grid::Grid;
@@ -9,7 +11,8 @@ use crate::material::LinearElastic;
 use crate::points::Points;
 use crate::quadrature::gauss_legendre;
 use crate::scene::{
-    AnalysisSpec, DirichletKind, ExactSpec, FieldError, Locator, MaterialModel, Placement, Scene, SceneError,
+    AnalysisSpec, BodySpec, BoundarySpec, DirichletKind, ExactSpec, FieldError, LayerSide, Locator, MaterialModel,
+    MaterialSide, Placement, RegionSpec, Scene, SceneError, TractionSpec,
 };
 
 /// A body: a named set of points of one material with one basis.
@@ -23,14 +26,21 @@ pub struct Body {
     pub region_area: f64,
 }
 
-/// A grid-aligned Dirichlet condition: on grid line `index` along `axis`
-/// (`axis = 0`: the vertical line `x = c`; `1`: the horizontal line `y = c`),
-/// component `k` is prescribed to `value[k]` (total at load factor 1) where
-/// `Some`.
+/// Where a grid-aligned Dirichlet condition acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridTarget {
+    /// Every node of grid line `index` along `axis` (`0`: the vertical line
+    /// `x = c`; `1`: the horizontal line `y = c`).
+    Line { axis: usize, index: usize },
+    /// One grid node.
+    Node(usize),
+}
+
+/// A grid-aligned Dirichlet condition: component `k` of the target nodes is
+/// prescribed to `value[k]` (total at load factor 1) where `Some`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct DirichletLine {
-    pub axis: usize,
-    pub index: usize,
+pub struct GridDirichlet {
+    pub target: GridTarget,
     pub value: [Option<f64>; 2],
 }
 
@@ -51,10 +61,12 @@ pub struct Model {
     pub material_names: Vec<String>,
     pub bodies: Vec<Body>,
     pub points: Points,
-    pub dirichlet: Vec<DirichletLine>,
+    pub dirichlet: Vec<GridDirichlet>,
     /// Gravitational acceleration (m/s^2); body force = density * gravity.
     pub gravity: P2,
     pub point_loads: Vec<PointLoad>,
+    /// B-spline boundaries (tracked curves, optionally with tractions).
+    pub boundaries: Vec<Boundary>,
     pub analysis: AnalysisSpec,
     pub exact: Option<ExactSolution>,
 }
@@ -120,6 +132,8 @@ impl Model {
             return Err(FieldError::new("body", "at least one [[body]] is needed"));
         }
         let mut bodies = Vec::new();
+        let mut regions = Vec::new();
+        let mut ranges = Vec::new();
         let mut points = Points::default();
         for (k, b) in scene.bodies.iter().enumerate() {
             let f = |n: &str| format!("body[{k}].{n}");
@@ -155,8 +169,14 @@ impl Model {
             }
             let before = points.len();
             let density = materials[material].density;
-            generate_points(&grid, &region, b.points_per_cell, b.placement, density, k, &mut points)
-                .map_err(|m| FieldError::new(f("placement"), m))?;
+            if b.placement == Placement::Polar {
+                polar_points(b, density, k, &mut points).map_err(|(field, m)| FieldError::new(f(field), m))?;
+            } else if b.placement == Placement::Lattice {
+                lattice_points(b, density, k, &mut points).map_err(|(field, m)| FieldError::new(f(field), m))?;
+            } else {
+                generate_points(&grid, &region, b.points_per_cell, b.placement, density, k, &mut points)
+                    .map_err(|m| FieldError::new(f("placement"), m))?;
+            }
             if points.len() == before {
                 return Err(FieldError::new(
                     f("region"),
@@ -178,6 +198,8 @@ impl Model {
                     }
                 }
             }
+            ranges.push(before..points.len());
+            regions.push(region.clone());
             bodies.push(Body {
                 name: b.name.clone(),
                 material,
@@ -190,19 +212,42 @@ impl Model {
         let mut dirichlet = Vec::new();
         for (k, d) in scene.dirichlet.iter().enumerate() {
             let f = |n: &str| format!("dirichlet[{k}].{n}");
-            let (axis, c, key) = match (d.x, d.y) {
-                (Some(x), None) => (0, x, "x"),
-                (None, Some(y)) => (1, y, "y"),
+            let (target, axis) = match (d.x, d.y, d.node) {
+                (Some(x), None, None) => (
+                    GridTarget::Line {
+                        axis: 0,
+                        index: grid
+                            .line_index(0, x)
+                            .ok_or_else(|| FieldError::new(f("x"), format!("x = {x} is not a grid line")))?,
+                    },
+                    0,
+                ),
+                (None, Some(y), None) => (
+                    GridTarget::Line {
+                        axis: 1,
+                        index: grid
+                            .line_index(1, y)
+                            .ok_or_else(|| FieldError::new(f("y"), format!("y = {y} is not a grid line")))?,
+                    },
+                    1,
+                ),
+                (None, None, Some(at)) => {
+                    if d.kind != DirichletKind::Fixed {
+                        return Err(FieldError::new(f("kind"), "a condition on one node must be `fixed`"));
+                    }
+                    let (i, j) = (grid.line_index(0, at[0]), grid.line_index(1, at[1]));
+                    let (Some(i), Some(j)) = (i, j) else {
+                        return Err(FieldError::new(f("node"), format!("{at:?} is not a grid node")));
+                    };
+                    (GridTarget::Node(grid.node(i, j)), 0)
+                }
                 _ => {
                     return Err(FieldError::new(
                         format!("dirichlet[{k}]"),
-                        "give exactly one of `x` or `y`",
+                        "give exactly one of `x`, `y` or `node`",
                     ))
                 }
             };
-            let index = grid
-                .line_index(axis, c)
-                .ok_or_else(|| FieldError::new(f(key), format!("{key} = {c} is not a grid line")))?;
             let value = match d.kind {
                 DirichletKind::Fixed => {
                     if d.normal_displacement.is_some() {
@@ -233,7 +278,7 @@ impl Model {
                     v
                 }
             };
-            dirichlet.push(DirichletLine { axis, index, value });
+            dirichlet.push(GridDirichlet { target, value });
         }
 
         let gravity = scene.loads.gravity.unwrap_or([0.0; 2]);
@@ -268,6 +313,18 @@ impl Model {
             Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
         };
 
+        let mut boundaries: Vec<Boundary> = Vec::new();
+        for (k, spec) in scene.boundaries.iter().enumerate() {
+            if boundaries.iter().any(|b| b.name == spec.name) {
+                return Err(FieldError::new(
+                    format!("boundary[{k}].name"),
+                    format!("boundary `{}` is defined twice", spec.name),
+                ));
+            }
+            let b = build_boundary(k, spec, &grid, &bodies, &regions, &ranges, exact.is_some(), &mut points)?;
+            boundaries.push(b);
+        }
+
         Ok(Model {
             name: scene.scene.name.clone(),
             description: scene.scene.description.trim().to_string(),
@@ -279,6 +336,7 @@ impl Model {
             dirichlet,
             gravity,
             point_loads,
+            boundaries,
             analysis: a.clone(),
             exact,
         })
@@ -359,6 +417,38 @@ fn build_exact(
                 material,
             })
         }
+        ExactSpec::ConfinedY { stress_yy, base } => Ok(ExactSolution::ConfinedY {
+            stress_yy,
+            base,
+            material,
+        }),
+        ExactSpec::Lame {
+            pressure,
+            r_inner,
+            r_outer,
+            center,
+        } => {
+            if !(r_inner > 0.0 && r_outer > r_inner) {
+                return Err(FieldError::new("exact.r_outer", "need 0 < r_inner < r_outer"));
+            }
+            Ok(ExactSolution::Lame {
+                p: pressure,
+                a: r_inner,
+                b: r_outer,
+                center,
+                material,
+            })
+        }
+        ExactSpec::Kirsch { stress, radius } => {
+            if !(radius > 0.0) {
+                return Err(FieldError::new("exact.radius", "must be positive"));
+            }
+            Ok(ExactSolution::Kirsch {
+                s: stress,
+                a: radius,
+                material,
+            })
+        }
         ExactSpec::UniaxialY { strain_yy, anchor } => {
             if !strain_yy.is_finite() || !anchor.iter().all(|a| a.is_finite()) {
                 return Err(FieldError::new("exact", "parameters must be finite"));
@@ -373,8 +463,9 @@ fn build_exact(
 }
 
 /// Fill `region` with points: per cell, `n x n` sub-cells clipped against the
-/// region (point at the clipped centroid, volume = clipped area; C Fig. 4), or
-/// `n x n` Gauss points for [`Placement::Gauss`]. GIMP half-lengths are the
+/// region (point at the clipped centroid, volume = clipped area; C Fig. 4),
+/// sub-cell centres inside the region ([`Placement::Centres`]), or `n x n`
+/// Gauss points ([`Placement::Gauss`]). GIMP half-lengths are the
 /// clipped extent scaled so that `4 l_x l_y = V`.
 fn generate_points(
     grid: &Grid,
@@ -432,6 +523,13 @@ fn generate_points(
                         );
                         continue;
                     }
+                    if placement == Placement::Centres {
+                        let x = [s0[0] + 0.5 * sub, s0[1] + 0.5 * sub];
+                        if region.contains(x) {
+                            pts.push(x, sub * sub, density, [0.5 * sub; 2], body);
+                        }
+                        continue;
+                    }
                     let c = region.clip(s0, s1);
                     if c.area <= 1e-12 * sub * sub {
                         continue;
@@ -449,4 +547,252 @@ fn generate_points(
         }
     }
     Ok(())
+}
+
+/// Points of a polar placement: a polar lattice of `radial x circumferential`
+/// points that includes both radii and both end angles (so the innermost and
+/// outermost layers lie on the surfaces, B 4.3), each carrying its tributary
+/// area `(r+^2 - r-^2)/2 (t+ - t-)` as volume, where `[r-, r+]` and
+/// `[t-, t+]` are the half-way lines to the neighbours clipped to the sector.
+fn polar_points(b: &BodySpec, density: f64, body: usize, pts: &mut Points) -> Result<(), (&'static str, String)> {
+    let RegionSpec::AnnulusSector {
+        center,
+        r_inner,
+        r_outer,
+        start_deg,
+        end_deg,
+        ..
+    } = b.region
+    else {
+        return Err(("region", "polar placement needs an annulus-sector region".into()));
+    };
+    let nr = b
+        .radial_points
+        .ok_or(("radial_points", "polar placement needs `radial_points`".to_string()))?;
+    let nc = b.circumferential_points.ok_or((
+        "circumferential_points",
+        "polar placement needs `circumferential_points`".to_string(),
+    ))?;
+    if nr < 2 || nc < 2 || nr * nc > 10_000_000 {
+        return Err((
+            "radial_points",
+            "need at least 2 points each way (and not absurdly many)".into(),
+        ));
+    }
+    let (t0, t1) = (start_deg.to_radians(), end_deg.to_radians());
+    let dr = (r_outer - r_inner) / (nr - 1) as f64;
+    let dt = (t1 - t0) / (nc - 1) as f64;
+    for i in 0..nr {
+        let r = r_inner + i as f64 * dr;
+        let (rm, rp) = ((r - 0.5 * dr).max(r_inner), (r + 0.5 * dr).min(r_outer));
+        for j in 0..nc {
+            let t = t0 + j as f64 * dt;
+            let (tm, tp) = ((t - 0.5 * dt).max(t0), (t + 0.5 * dt).min(t1));
+            let area = 0.5 * (rp * rp - rm * rm) * (tp - tm);
+            let l = 0.5 * area.sqrt();
+            // Surface points sit a hair (1e-9 of a spacing) inside the
+            // material: a point exactly on a grid line at the far side of its
+            // body would otherwise be mapped to the empty cell beyond and
+            // activate nodes held by nothing else.
+            let (rr, tt) = (
+                (r.max(r_inner + 1e-9 * dr)).min(r_outer - 1e-9 * dr),
+                (t.max(t0 + 1e-9 * dt)).min(t1 - 1e-9 * dt),
+            );
+            pts.push(
+                [center[0] + rr * tt.cos(), center[1] + rr * tt.sin()],
+                area,
+                density,
+                [l, l],
+                body,
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Points of a lattice placement: `nx x ny` points at the centres of equal
+/// sub-rectangles of a rectangle region.
+fn lattice_points(b: &BodySpec, density: f64, body: usize, pts: &mut Points) -> Result<(), (&'static str, String)> {
+    let RegionSpec::Rectangle { min, max } = b.region else {
+        return Err(("region", "lattice placement needs a rectangle region".into()));
+    };
+    let [nx, ny] = b
+        .lattice
+        .ok_or(("lattice", "lattice placement needs `lattice = [nx, ny]`".to_string()))?;
+    if nx == 0 || ny == 0 || nx * ny > 10_000_000 {
+        return Err(("lattice", "point counts must be positive (and not absurd)".into()));
+    }
+    let (dx, dy) = ((max[0] - min[0]) / nx as f64, (max[1] - min[1]) / ny as f64);
+    for j in 0..ny {
+        for i in 0..nx {
+            let x = [min[0] + (i as f64 + 0.5) * dx, min[1] + (j as f64 + 0.5) * dy];
+            pts.push(x, dx * dy, density, [0.5 * dx, 0.5 * dy], body);
+        }
+    }
+    Ok(())
+}
+
+/// Indices of a layer of points (see [`LayerSide`]), in order along it.
+fn layer_points(pts: &Points, range: std::ops::Range<usize>, side: LayerSide, center: P2, tol: f64) -> Vec<usize> {
+    // Key along the layer (x, y or angle) and depth across it (larger is outer).
+    let key_depth = |p: usize| -> (f64, f64) {
+        let x = pts.x[p];
+        match side {
+            LayerSide::Top => (x[0], x[1]),
+            LayerSide::Bottom => (x[0], -x[1]),
+            LayerSide::Left => (x[1], -x[0]),
+            LayerSide::Right => (x[1], x[0]),
+            LayerSide::Inner | LayerSide::Outer => {
+                let (dx, dy) = (x[0] - center[0], x[1] - center[1]);
+                let r = dx.hypot(dy);
+                // Angles scaled by the radius keep the tolerance a length.
+                (dy.atan2(dx), if side == LayerSide::Outer { r } else { -r })
+            }
+        }
+    };
+    let angular = matches!(side, LayerSide::Inner | LayerSide::Outer);
+    let ktol = if angular { 1e-9 } else { tol };
+    let mut idx: Vec<usize> = range.filter(|&p| pts.vol[p] > 0.0).collect();
+    idx.sort_by(|&a, &b| key_depth(a).0.total_cmp(&key_depth(b).0));
+    let mut out = Vec::new();
+    let mut k = 0;
+    while k < idx.len() {
+        let k0 = key_depth(idx[k]).0;
+        let mut best = idx[k];
+        while k < idx.len() && key_depth(idx[k]).0 - k0 <= ktol {
+            if key_depth(idx[k]).1 > key_depth(best).1 {
+                best = idx[k];
+            }
+            k += 1;
+        }
+        out.push(best);
+    }
+    out
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_boundary(
+    k: usize,
+    spec: &BoundarySpec,
+    grid: &Grid,
+    bodies: &[Body],
+    regions: &[Region],
+    ranges: &[std::ops::Range<usize>],
+    has_exact: bool,
+    points: &mut Points,
+) -> Result<Boundary, FieldError> {
+    let f = |n: &str| format!("boundary[{k}].{n}");
+    let body = bodies
+        .iter()
+        .position(|b| b.name == spec.body)
+        .ok_or_else(|| FieldError::new(f("body"), format!("no body named `{}`", spec.body)))?;
+    let idx: Vec<usize> = match (&spec.points, spec.layer) {
+        (Some(list), None) => {
+            let gmax = grid.max();
+            let tol = 1e-9 * grid.h;
+            let mut idx = Vec::new();
+            for (i, p) in list.iter().enumerate() {
+                if !(p.iter().all(|v| v.is_finite())
+                    && p[0] >= grid.origin[0] - tol
+                    && p[1] >= grid.origin[1] - tol
+                    && p[0] <= gmax[0] + tol
+                    && p[1] <= gmax[1] + tol)
+                {
+                    return Err(FieldError::new(f("points"), format!("point {i} lies outside the grid")));
+                }
+                // Zero-volume tracking point: follows the body, carries nothing.
+                points.push(*p, 0.0, 0.0, [0.0; 2], body);
+                idx.push(points.len() - 1);
+            }
+            idx
+        }
+        (None, Some(side)) => {
+            let center = spec.center.unwrap_or([0.0; 2]);
+            if matches!(side, LayerSide::Inner | LayerSide::Outer) && spec.center.is_none() {
+                return Err(FieldError::new(f("center"), "inner and outer layers need a `center`"));
+            }
+            layer_points(points, ranges[body].clone(), side, center, 1e-9 * grid.h)
+        }
+        _ => {
+            return Err(FieldError::new(
+                format!("boundary[{k}]"),
+                "give exactly one of `points` or `layer`",
+            ))
+        }
+    };
+    let mut corners = vec![false; idx.len()];
+    for &c in &spec.corners {
+        *corners
+            .get_mut(c)
+            .ok_or_else(|| FieldError::new(f("corners"), format!("there is no point {c}")))? = true;
+    }
+    if !(1..=20).contains(&spec.gauss_points) {
+        return Err(FieldError::new(f("gauss_points"), "must be between 1 and 20"));
+    }
+    let traction = match &spec.traction {
+        None => None,
+        Some(TractionSpec::Vector { value }) => {
+            if !value.iter().all(|v| v.is_finite()) {
+                return Err(FieldError::new(f("traction"), "must be finite"));
+            }
+            Some(Traction::Vector(*value))
+        }
+        Some(TractionSpec::Pressure { value }) => {
+            if !value.is_finite() {
+                return Err(FieldError::new(f("traction"), "must be finite"));
+            }
+            Some(Traction::Pressure(*value))
+        }
+        Some(TractionSpec::ExactStress) => {
+            if !has_exact {
+                return Err(FieldError::new(
+                    f("traction"),
+                    "exact-stress traction needs an [exact] solution",
+                ));
+            }
+            Some(Traction::ExactStress)
+        }
+    };
+    let q: Vec<P2> = idx.iter().map(|&p| points.x[p]).collect();
+    let spline =
+        BSpline::interpolate(&q, spec.closed, &corners).map_err(|e| FieldError::new(f("points"), e.to_string()))?;
+    let outward = match spec.material_side {
+        Some(MaterialSide::Left) => 1.0,
+        Some(MaterialSide::Right) => -1.0,
+        None => material_side(&spline, &regions[body], grid.h).ok_or_else(|| {
+            FieldError::new(
+                f("material_side"),
+                "cannot tell which side of the curve the material is on; give material_side = \"left\" or \"right\"",
+            )
+        })?,
+    };
+    Ok(Boundary {
+        name: spec.name.clone(),
+        points: idx,
+        closed: spec.closed,
+        corners,
+        gauss_points: spec.gauss_points,
+        traction,
+        outward,
+    })
+}
+
+/// `+1` when the material lies to the left of the curve (outward normal =
+/// right normal), `-1` when to the right, by probing the region on both
+/// sides of the middle of the curve at growing distances.
+fn material_side(s: &BSpline, region: &Region, h: f64) -> Option<f64> {
+    let k = s.segments.len() / 2;
+    let x = s.point(k, 0.5);
+    let n = s.right_normal(k, 0.5);
+    for eps in [0.05, 0.1, 0.25, 0.5, 1.0, 2.0] {
+        let d = eps * h;
+        let right = region.contains([x[0] + d * n[0], x[1] + d * n[1]]);
+        let left = region.contains([x[0] - d * n[0], x[1] - d * n[1]]);
+        match (left, right) {
+            (true, false) => return Some(1.0),
+            (false, true) => return Some(-1.0),
+            _ => {}
+        }
+    }
+    None
 }

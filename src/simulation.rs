@@ -15,6 +15,7 @@
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
 use crate::assembly::{Dof, Mapping};
+use crate::boundary::{self, bspline::BSpline, BoundaryReport};
 use crate::exact::ErrorNorm;
 use crate::geometry::P2;
 use crate::linalg::{self, Condition};
@@ -69,7 +70,8 @@ pub struct StepReport {
     /// `|r|` of the step's right-hand side (N).
     pub residual_norm: f64,
     /// Relative residuals per iteration: `1` before the solve, then
-    /// `|K du - r| / |r|` after it (one linear solve per step here).
+    /// `|K du - r| / |r|` after it and after each round of iterative
+    /// refinement (taken only while above the tolerance, at most two).
     pub residuals: Vec<f64>,
     pub timings: Timings,
     pub energy: Energy,
@@ -78,6 +80,9 @@ pub struct StepReport {
     pub errors: Vec<ErrorNorm>,
     /// Largest nodal displacement increment of the step (m).
     pub max_increment: f64,
+    /// Each boundary as it was at the start of the step, with its traction
+    /// resultant at this step's load factor.
+    pub boundaries: Vec<BoundaryReport>,
 }
 
 /// Why a step did not complete. The state stays at the last good step.
@@ -99,6 +104,10 @@ pub enum StepFailure {
         what: String,
         residuals: Vec<f64>,
     },
+    /// A boundary's spline could not be built from its points.
+    Boundary { step: usize, name: String, reason: String },
+    /// A point would leave the grid.
+    LeftGrid { step: usize, point: usize, position: P2 },
 }
 
 impl StepFailure {
@@ -107,7 +116,9 @@ impl StepFailure {
             StepFailure::Finished { steps } => *steps,
             StepFailure::Singular { step, .. }
             | StepFailure::NotConverged { step, .. }
-            | StepFailure::NonFinite { step, .. } => *step,
+            | StepFailure::NonFinite { step, .. }
+            | StepFailure::Boundary { step, .. }
+            | StepFailure::LeftGrid { step, .. } => *step,
         }
     }
 
@@ -134,6 +145,14 @@ impl fmt::Display for StepFailure {
                 residuals.last().copied().unwrap_or(f64::NAN),
                 fmt_residuals(residuals)
             ),
+            StepFailure::LeftGrid { step, point, position } => write!(
+                f,
+                "step {step} failed: point {point} would move to ({:.4}, {:.4}), outside the grid; enlarge the grid",
+                position[0], position[1]
+            ),
+            StepFailure::Boundary { step, name, reason } => {
+                write!(f, "step {step} failed: boundary `{name}`: {reason}")
+            }
             StepFailure::NonFinite { step, what, residuals } => write!(
                 f,
                 "step {step} failed: non-finite {what} (residuals {})",
@@ -262,7 +281,7 @@ impl Simulation {
         );
         let d_of = |p: usize| self.model.materials[self.model.bodies[self.state.points.body[p]].material].d_matrix();
         let (k, coupling) = map.pattern().assemble(&map, &self.state.points, &d_of);
-        let forces = self.nodal_forces(&map);
+        let (forces, boundaries) = self.nodal_forces(&map, step, lambda1)?;
         let rhs: Vec<f64> = (0..map.dofs.n_free)
             .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
             .collect();
@@ -277,17 +296,32 @@ impl Simulation {
         })?;
         timings.factorisation = t.elapsed().as_secs_f64();
 
-        // 4. Solve and check the residual.
+        // 4. Solve and check the residual; ill-conditioned systems (tiny
+        // point volumes near boundaries) get up to two rounds of iterative
+        // refinement with the same factor, each recorded as a residual.
         let t = Instant::now();
-        let du = linalg::solve(&factor, &rhs);
-        let kdu = linalg::sym_lower_mul(&k, &du);
-        let lin: Vec<f64> = kdu.iter().zip(&rhs).map(|(a, b)| a - b).collect();
-        let rel = if residual_norm > 0.0 {
-            norm(&lin) / residual_norm
-        } else {
-            norm(&lin)
+        let rel_of = |v: &[f64]| {
+            if residual_norm > 0.0 {
+                norm(v) / residual_norm
+            } else {
+                norm(v)
+            }
         };
-        let residuals = vec![if residual_norm > 0.0 { 1.0 } else { 0.0 }, rel];
+        let mut du = linalg::solve(&factor, &rhs);
+        let mut lin = residual_of(&k, &du, &rhs);
+        let mut rel = rel_of(&lin);
+        let mut residuals = vec![if residual_norm > 0.0 { 1.0 } else { 0.0 }, rel];
+        for _ in 0..2 {
+            if !(rel > self.params.tolerance) {
+                break;
+            }
+            let neg: Vec<f64> = lin.iter().map(|v| -v).collect();
+            let correction = linalg::solve(&factor, &neg);
+            du.iter_mut().zip(&correction).for_each(|(a, c)| *a += c);
+            lin = residual_of(&k, &du, &rhs);
+            rel = rel_of(&lin);
+            residuals.push(rel);
+        }
         timings.solve = t.elapsed().as_secs_f64();
         if !residual_norm.is_finite() || !rel.is_finite() || du.iter().any(|v| !v.is_finite()) {
             return Err(StepFailure::NonFinite {
@@ -326,6 +360,13 @@ impl Simulation {
                 step,
                 what: format!("stress or position at point {p}"),
                 residuals,
+            });
+        }
+        if let Some(p) = (0..points.len()).find(|&p| self.model.grid.cell_of(points.x[p]).is_none()) {
+            return Err(StepFailure::LeftGrid {
+                step,
+                point: p,
+                position: points.x[p],
             });
         }
         // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
@@ -371,13 +412,29 @@ impl Simulation {
             condition,
             errors,
             max_increment,
+            boundaries,
         })
     }
 
-    /// External force per unit load factor and internal force of the
+    /// The splines of all boundaries through the points' current positions.
+    pub fn boundary_splines(&self) -> Vec<(String, Option<BSpline>)> {
+        self.model
+            .boundaries
+            .iter()
+            .map(|b| (b.name.clone(), b.spline(&self.state.points).ok()))
+            .collect()
+    }
+
+    /// External force per unit load factor (body forces, point loads,
+    /// boundary tractions on the current curves) and internal force of the
     /// current stresses, on the free dofs, and the internal force on the
-    /// prescribed ones.
-    fn nodal_forces(&self, map: &Mapping) -> Forces {
+    /// prescribed ones; with a report per boundary.
+    fn nodal_forces(
+        &self,
+        map: &Mapping,
+        step: usize,
+        lambda: f64,
+    ) -> Result<(Forces, Vec<BoundaryReport>), StepFailure> {
         let pts = &self.state.points;
         let mut f = Forces {
             ext: vec![0.0; map.dofs.n_free],
@@ -415,7 +472,26 @@ impl Simulation {
                 }
             }
         }
-        f
+        let active = |n: usize| map.dofs.node_dof[n][0] != Dof::Inactive;
+        let mut reports = Vec::with_capacity(self.model.boundaries.len());
+        for b in &self.model.boundaries {
+            let spline = b.spline(pts).map_err(|e| StepFailure::Boundary {
+                step,
+                name: b.name.clone(),
+                reason: e.to_string(),
+            })?;
+            let (forces, report) =
+                boundary::traction_forces(b, &spline, &self.model.grid, self.model.exact.as_ref(), &active, lambda);
+            for (n, force) in forces {
+                for c in 0..2 {
+                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                        f.ext[i] += force[c];
+                    }
+                }
+            }
+            reports.push(report);
+        }
+        Ok((f, reports))
     }
 
     /// Points after applying nodal increments, and the internal force of
@@ -478,6 +554,15 @@ fn nodal_increments(map: &Mapping, du: &[f64]) -> Vec<P2> {
             }
             u
         })
+        .collect()
+}
+
+/// `K du - rhs`.
+fn residual_of(k: &faer::sparse::SparseColMat<usize, f64>, du: &[f64], rhs: &[f64]) -> Vec<f64> {
+    linalg::sym_lower_mul(k, du)
+        .iter()
+        .zip(rhs)
+        .map(|(a, b)| a - b)
         .collect()
 }
 

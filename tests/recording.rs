@@ -89,3 +89,41 @@ fn recording_holds_grid_points_and_metrics() {
         assert_eq!(series["/metrics/unknowns"][&s], r.unknowns as f64);
     }
 }
+
+#[test]
+fn boundary_curves_are_recorded() {
+    let mut sim = sim_with("thick-cylinder", |_| {});
+    let text = std::fs::read_to_string(common::scene_path("thick-cylinder")).unwrap();
+    let path = temp_path("rec-boundary", "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    let r = sim.step().unwrap();
+    rec.log_step(&r, &sim).unwrap();
+    rec.finish().unwrap();
+    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(std::fs::File::open(&path).unwrap())).unwrap();
+    let scalars = rerun::Scalars::descriptor_scalars().component;
+    let mut entities = std::collections::BTreeSet::new();
+    let mut length = None;
+    for msg in decoder {
+        let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() else {
+            continue;
+        };
+        if !store.is_recording() {
+            continue;
+        }
+        let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+        let e = chunk.entity_path().to_string();
+        if e == "/metrics/boundary/inner/length" {
+            length = chunk.iter_slices::<f64>(scalars).next().map(|v| v[0]);
+        }
+        entities.insert(e);
+    }
+    let _ = std::fs::remove_file(&path);
+    for e in [
+        "/boundaries/inner/curve",
+        "/boundaries/inner/control_points",
+        "/boundaries/outer/curve",
+    ] {
+        assert!(entities.contains(e), "missing {e}");
+    }
+    assert_eq!(length, Some(r.boundaries[0].length));
+}

@@ -63,3 +63,31 @@ fn a_step_updates_the_screen() {
     app.apply(Action::ToggleHelp);
     assert!(screen(&app).join("\n").contains("take one load step"));
 }
+
+#[test]
+fn boundaries_are_drawn_and_reported() {
+    let mut sim = sim_with("square-traction-aligned", |_| {});
+    let mut app = App::new(&sim, None);
+    assert_eq!(app.view.boundaries.len(), 1);
+    assert!(app.view.boundaries[0].loaded && app.view.boundaries[0].curve.len() > 10);
+    let buffer = |app: &App| {
+        let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+        t.draw(|f| draw(f, app)).unwrap();
+        t.backend().buffer().clone()
+    };
+    let before = buffer(&app);
+    app.apply(Action::ToggleControlPoints);
+    let after = buffer(&app);
+    // Control points add yellow dots to the canvas (on the loaded curve,
+    // which is drawn red).
+    let count =
+        |b: &ratatui::buffer::Buffer, c: ratatui::style::Color| b.content.iter().filter(|cell| cell.fg == c).count();
+    assert_eq!(count(&before, ratatui::style::Color::Yellow), 0);
+    assert!(count(&after, ratatui::style::Color::Yellow) > 0);
+    assert!(count(&before, ratatui::style::Color::LightRed) > 0);
+    app.apply(Action::Step);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    let all = screen(&app).join("\n");
+    assert!(all.contains("top: L 1.0000 m, 2 cells"), "{all}");
+}

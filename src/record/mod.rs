@@ -9,6 +9,9 @@
 //! | `grid` | LineStrips2D | static |
 //! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume | every step |
+//! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | every step |
+//! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | every step |
+//! | `metrics/boundary/<name>/{length,area,cells_cut,resultant_x,resultant_y}` | Scalars | every step |
 //! | `metrics/residual` | Scalars, on `iteration` | every iteration |
 //! | `metrics/condition/stiffness` | Scalars | every step |
 //! | `metrics/log10/residual`, `metrics/log10/condition/stiffness` | Scalars | as above |
@@ -166,7 +169,30 @@ impl Recorder {
         self.check(self.rec.log(
             "grid/active",
             &rerun::LineStrips2D::new(boxes).with_colors([rerun::Color::from_rgb(60, 120, 200)]),
-        ))
+        ))?;
+        for ((name, spline), b) in sim.boundary_splines().into_iter().zip(&sim.model().boundaries) {
+            let Some(s) = spline else { continue };
+            let color = if b.traction.is_some() {
+                rerun::Color::from_rgb(230, 80, 60)
+            } else {
+                rerun::Color::from_rgb(230, 230, 230)
+            };
+            let curve: Vec<[f32; 2]> = s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
+            self.check(self.rec.log(
+                format!("boundaries/{name}/curve"),
+                &rerun::LineStrips2D::new([curve]).with_colors([color]),
+            ))?;
+            let control: Vec<[f32; 2]> = s
+                .segments
+                .iter()
+                .flat_map(|seg| seg.iter().map(|p| [p[0] as f32, p[1] as f32]))
+                .collect();
+            self.check(self.rec.log(
+                format!("boundaries/{name}/control_points"),
+                &rerun::Points2D::new(control).with_colors([rerun::Color::from_rgb(240, 200, 40)]),
+            ))?;
+        }
+        Ok(())
     }
 
     fn scalar(&self, path: &str, v: f64) -> Result<(), RecordError> {
@@ -200,6 +226,16 @@ impl Recorder {
             self.scalar(&format!("metrics/time/{name}"), v)?;
         }
         self.scalar("metrics/unknowns", report.unknowns as f64)?;
+        for b in &report.boundaries {
+            let base = format!("metrics/boundary/{}", b.name);
+            self.scalar(&format!("{base}/length"), b.length)?;
+            if let Some(a) = b.area {
+                self.scalar(&format!("{base}/area"), a)?;
+            }
+            self.scalar(&format!("{base}/cells_cut"), b.cells_cut as f64)?;
+            self.scalar(&format!("{base}/resultant_x"), b.resultant[0])?;
+            self.scalar(&format!("{base}/resultant_y"), b.resultant[1])?;
+        }
         self.log_state(sim)
     }
 

@@ -30,6 +30,8 @@ pub struct Scene {
     pub bodies: Vec<BodySpec>,
     #[serde(default, rename = "dirichlet")]
     pub dirichlet: Vec<DirichletSpec>,
+    #[serde(default, rename = "boundary")]
+    pub boundaries: Vec<BoundarySpec>,
     #[serde(default)]
     pub loads: LoadsSpec,
     pub analysis: AnalysisSpec,
@@ -98,9 +100,21 @@ pub enum Placement {
     /// centroid, volume = clipped area (C Fig. 4).
     #[default]
     Clipped,
+    /// n x n sub-cells kept when their centre lies inside the region, point
+    /// at the centre with the whole sub-cell area (AMPLE's way): volumes are
+    /// exact only for grid-aligned regions, but no point is a sliver.
+    #[serde(alias = "centers")]
+    Centres,
     /// n x n Gauss-Legendre points with Gauss weights as volumes: the
     /// finite-element limit. Cells must lie wholly inside or outside the region.
     Gauss,
+    /// For an annulus-sector region: `radial_points` x `circumferential_points`
+    /// points on a polar lattice including both radii and both end angles,
+    /// each with its tributary area as volume (B 4.3).
+    Polar,
+    /// For a rectangle region: `lattice = [nx, ny]` points in a regular
+    /// array over the rectangle, independent of the grid (B 4.2).
+    Lattice,
 }
 
 /// `[[body]]`: a region filled with points of one material.
@@ -116,6 +130,89 @@ pub struct BodySpec {
     #[serde(default)]
     pub placement: Placement,
     pub region: RegionSpec,
+    /// Lattice placement only: points along x and y.
+    #[serde(default)]
+    pub lattice: Option<[usize; 2]>,
+    /// Polar placement only: points along the radius.
+    #[serde(default)]
+    pub radial_points: Option<usize>,
+    /// Polar placement only: points along the circumference.
+    #[serde(default)]
+    pub circumferential_points: Option<usize>,
+}
+
+/// Which layer of a body's points a boundary passes through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LayerSide {
+    /// Per column of points (equal x), the highest; ordered by x.
+    Top,
+    /// Per column, the lowest; ordered by x.
+    Bottom,
+    /// Per row (equal y), the leftmost; ordered by y.
+    Left,
+    /// Per row, the rightmost; ordered by y.
+    Right,
+    /// Per ray from `center` (equal angle), the nearest; ordered by angle.
+    Inner,
+    /// Per ray, the farthest; ordered by angle.
+    Outer,
+}
+
+/// Which side of the curve's direction of travel the material lies on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MaterialSide {
+    Left,
+    Right,
+}
+
+/// A traction on a boundary, at load factor 1.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum TractionSpec {
+    /// Fixed traction vector (Pa).
+    Vector { value: [f64; 2] },
+    /// Pressure (Pa) normal to the current curve, pushing into the material.
+    Pressure { value: f64 },
+    /// `s_exact(x) n` from the scene's `[exact]` solution.
+    ExactStress,
+}
+
+/// `[[boundary]]`: a B-spline through zero-volume tracking points or
+/// through a layer of a body's points, rebuilt every step.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoundarySpec {
+    pub name: String,
+    /// The body whose displacement the boundary follows.
+    pub body: String,
+    /// Explicit tracking points (zero volume and mass).
+    #[serde(default)]
+    pub points: Option<Vec<[f64; 2]>>,
+    /// Or: a layer of the body's own points.
+    #[serde(default)]
+    pub layer: Option<LayerSide>,
+    /// Centre for `inner` and `outer` layers.
+    #[serde(default)]
+    pub center: Option<[f64; 2]>,
+    #[serde(default)]
+    pub closed: bool,
+    /// Indices of points that are corners.
+    #[serde(default)]
+    pub corners: Vec<usize>,
+    /// Gauss points per piece of curve for the traction integral.
+    #[serde(default = "default_gauss_points")]
+    pub gauss_points: usize,
+    #[serde(default)]
+    pub traction: Option<TractionSpec>,
+    /// Side of the material; found from the body's region when omitted.
+    #[serde(default)]
+    pub material_side: Option<MaterialSide>,
+}
+
+fn default_gauss_points() -> usize {
+    3
 }
 
 /// Kind of a grid-aligned Dirichlet condition.
@@ -129,7 +226,8 @@ pub enum DirichletKind {
 }
 
 /// `[[dirichlet]]`: a condition on every active node of the grid line
-/// `x = c` or `y = c`. Values are totals at load factor 1 (m), applied in
+/// `x = c` or `y = c`, or on the single grid node `node = [x, y]` (a roller
+/// there needs `x` or `y` to say its normal, so use `fixed` for nodes). Values are totals at load factor 1 (m), applied in
 /// proportion to the load factor; zero when omitted.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -139,6 +237,9 @@ pub struct DirichletSpec {
     pub x: Option<f64>,
     #[serde(default)]
     pub y: Option<f64>,
+    /// Or a single grid node at this position.
+    #[serde(default)]
+    pub node: Option<[f64; 2]>,
     /// For `fixed`: the prescribed displacement vector.
     #[serde(default)]
     pub displacement: Option<[f64; 2]>,
@@ -226,6 +327,20 @@ pub enum ExactSpec {
     /// Uniaxial stress in y with free lateral faces: total strain
     /// `strain_yy`, `u = 0` at `anchor`.
     UniaxialY { strain_yy: f64, anchor: [f64; 2] },
+    /// Uniform vertical stress `stress_yy` (Pa) with lateral confinement
+    /// (`u_x = 0`), `u_y = 0` on `y = base`.
+    ConfinedY { stress_yy: f64, base: f64 },
+    /// Thick cylinder (Lame) under internal pressure `pressure` (Pa) between
+    /// radii `r_inner` and `r_outer` about `center`.
+    Lame {
+        pressure: f64,
+        r_inner: f64,
+        r_outer: f64,
+        center: [f64; 2],
+    },
+    /// Infinite plate with a circular hole of `radius` at the origin under
+    /// remote stress `stress` along x (Kirsch; B (42)-(46)).
+    Kirsch { stress: f64, radius: f64 },
 }
 
 impl Scene {

@@ -9,6 +9,7 @@
 //! ```
 
 use super::FieldError;
+use crate::boundary::bspline::BSpline;
 use crate::geometry::{self, chords_for, Region, P2};
 use serde::Deserialize;
 
@@ -43,6 +44,22 @@ pub enum RegionSpec {
         #[serde(default)]
         tolerance: Option<f64>,
     },
+    /// The area inside a B-spline through `points` (flattened to
+    /// `per_segment` chords per segment, default 64). A closed spline
+    /// (default) bounds the region itself; an open one is closed by straight
+    /// lines through `close_via` back to its first point. `corners` as for
+    /// boundaries.
+    Spline {
+        points: Vec<P2>,
+        #[serde(default = "yes")]
+        closed: bool,
+        #[serde(default)]
+        close_via: Vec<P2>,
+        #[serde(default)]
+        corners: Vec<usize>,
+        #[serde(default)]
+        per_segment: Option<usize>,
+    },
     Union {
         parts: Vec<RegionSpec>,
     },
@@ -56,6 +73,10 @@ pub enum RegionSpec {
         about: P2,
         region: Box<RegionSpec>,
     },
+}
+
+fn yes() -> bool {
+    true
 }
 
 fn finite(field: &str, v: &[f64]) -> Result<(), FieldError> {
@@ -87,7 +108,7 @@ impl RegionSpec {
                 if geometry::self_intersects(vertices) {
                     return Err(FieldError::new(f("vertices"), "the polygon crosses itself"));
                 }
-                let poly = geometry::ccw(vertices.clone());
+                let poly = geometry::ccw(geometry::drop_collinear(vertices));
                 if geometry::area_centroid(&poly).0 <= 0.0 {
                     return Err(FieldError::new(f("vertices"), "the polygon has zero area"));
                 }
@@ -166,6 +187,31 @@ impl RegionSpec {
                     })
                     .collect();
                 Ok(Region { pieces })
+            }
+            RegionSpec::Spline {
+                points,
+                closed,
+                close_via,
+                corners,
+                per_segment,
+            } => {
+                finite(&f("points"), &points.concat())?;
+                let mut marks = vec![false; points.len()];
+                for &c in corners {
+                    *marks
+                        .get_mut(c)
+                        .ok_or_else(|| FieldError::new(f("corners"), format!("no point {c}")))? = true;
+                }
+                let spline = BSpline::interpolate(points, *closed, &marks)
+                    .map_err(|e| FieldError::new(f("points"), e.to_string()))?;
+                let mut poly = spline.sample(per_segment.unwrap_or(64).max(1));
+                if *closed {
+                    poly.pop(); // the last sample repeats the first
+                } else {
+                    finite(&f("close_via"), &close_via.concat())?;
+                    poly.extend(close_via.iter().copied());
+                }
+                RegionSpec::Polygon { vertices: poly }.build(path)
             }
             RegionSpec::Union { parts } => {
                 if parts.is_empty() {

@@ -16,6 +16,42 @@ pub struct View {
     pub values: Vec<f64>,
     pub field: Field,
     pub active_cells: Vec<usize>,
+    pub boundaries: Vec<BoundaryView>,
+}
+
+/// A boundary as drawn: the sampled spline and its Bezier control points.
+#[derive(Clone, Debug)]
+pub struct BoundaryView {
+    pub name: String,
+    pub curve: Vec<[f64; 2]>,
+    pub control: Vec<[f64; 2]>,
+    /// Carries a traction (drawn apart from merely tracked curves).
+    pub loaded: bool,
+}
+
+impl BoundaryView {
+    /// Views of all boundaries of a simulation at its current state.
+    pub fn all(sim: &Simulation) -> Vec<BoundaryView> {
+        sim.boundary_splines()
+            .into_iter()
+            .zip(&sim.model().boundaries)
+            .map(|((name, spline), b)| {
+                let (curve, control) = match spline {
+                    Some(s) => (
+                        s.sample(16),
+                        s.segments.iter().flat_map(|seg| seg.iter().copied()).collect(),
+                    ),
+                    None => (Vec::new(), Vec::new()),
+                };
+                BoundaryView {
+                    name,
+                    curve,
+                    control,
+                    loaded: b.traction.is_some(),
+                }
+            })
+            .collect()
+    }
 }
 
 impl View {
@@ -28,6 +64,7 @@ impl View {
             values: field.values(sim),
             field,
             active_cells: sim.active_cells().to_vec(),
+            boundaries: BoundaryView::all(sim),
         }
     }
 }
@@ -37,6 +74,7 @@ impl View {
 pub enum Action {
     Step,
     ToggleHelp,
+    ToggleControlPoints,
     CloseOverlay,
     NextField,
     Quit,
@@ -62,6 +100,8 @@ pub struct App {
     /// A step is being computed.
     pub busy: bool,
     pub show_help: bool,
+    /// Draw the boundaries' Bezier control points.
+    pub show_control: bool,
     pub recording: Option<String>,
     /// A message for the status line (e.g. recording errors).
     pub status: String,
@@ -80,6 +120,7 @@ impl App {
             failure: None,
             busy: false,
             show_help: false,
+            show_control: false,
             recording,
             status: String::new(),
             quit: false,
@@ -111,6 +152,10 @@ impl App {
             }
             Action::ToggleHelp => {
                 self.show_help = !self.show_help;
+                None
+            }
+            Action::ToggleControlPoints => {
+                self.show_control = !self.show_control;
                 None
             }
             Action::CloseOverlay => {

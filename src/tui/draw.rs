@@ -39,7 +39,7 @@ pub fn draw(frame: &mut Frame, app: &App) {
     let [last, table] = Layout::vertical([Constraint::Length(12), Constraint::Min(3)]).areas(side);
     draw_last_step(frame, app, last);
     draw_table(frame, app, table);
-    let keys = "space step · f field · ? help · q quit";
+    let keys = "space step · f field · c control pts · ? help · q quit";
     let rec = app
         .recording
         .as_deref()
@@ -97,6 +97,25 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
             for j in (0..=g.ny).step_by(step_j).chain([g.ny]) {
                 let y = g.origin[1] + j as f64 * g.h;
                 ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
+            }
+            ctx.layer();
+            for bv in &app.view.boundaries {
+                let color = if bv.loaded { Color::LightRed } else { Color::White };
+                for w in bv.curve.windows(2) {
+                    ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], color));
+                }
+            }
+            if app.show_control {
+                let coords: Vec<(f64, f64)> = app
+                    .view
+                    .boundaries
+                    .iter()
+                    .flat_map(|b| b.control.iter().map(|p| (p[0], p[1])))
+                    .collect();
+                ctx.draw(&Points {
+                    coords: &coords,
+                    color: Color::Yellow,
+                });
             }
             ctx.layer();
             for (b, coords) in bins.iter().enumerate() {
@@ -159,6 +178,17 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
                 "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
                 t.assembly, t.factorisation, t.solve, t.condition
             )));
+            for b in &r.boundaries {
+                lines.push(Line::raw(format!(
+                    "{}: L {:.4} m, {} cells, F ({:.3e}, {:.3e}) N{}",
+                    b.name,
+                    b.length,
+                    b.cells_cut,
+                    b.resultant[0],
+                    b.resultant[1],
+                    if b.lost > 0.0 { " LOST LOAD" } else { "" }
+                )));
+            }
             if !r.errors.is_empty() {
                 let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
                 lines.push(Line::raw(format!("errors: {}", e.join("  "))));
@@ -208,6 +238,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
     let text = vec![
         Line::raw("space   take one load step"),
         Line::raw("f       colour points by the next field"),
+        Line::raw("c       show or hide boundary control points"),
         Line::raw("?       show or hide this help"),
         Line::raw("Esc     close this help"),
         Line::raw("q       quit (the recording is closed cleanly)"),

@@ -23,6 +23,7 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char(' ') => Some(Action::Step),
         KeyCode::Char('?') => Some(Action::ToggleHelp),
         KeyCode::Char('f') => Some(Action::NextField),
+        KeyCode::Char('c') => Some(Action::ToggleControlPoints),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,

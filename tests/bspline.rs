@@ -1,0 +1,200 @@
+//! The B-spline boundary mathematics: interpolation, continuity, straight
+//! runs and corners, convergence to a circle, Gauss integration along
+//! pieces, and splitting at grid lines.
+
+use mpmlab::boundary::bspline::BSpline;
+use mpmlab::boundary::intersect::split;
+use mpmlab::grid::Grid;
+use mpmlab::quadrature::gauss_legendre;
+use proptest::prelude::*;
+
+fn close(a: [f64; 2], b: [f64; 2], tol: f64) -> bool {
+    (a[0] - b[0]).abs() <= tol && (a[1] - b[1]).abs() <= tol
+}
+
+fn random_points(seed: &[f64]) -> Vec<[f64; 2]> {
+    // A wiggly open curve with increasing x (steps 0.6 to 1.4, slopes up to
+    // about 1), so no two points coincide and there are no cusps.
+    seed.chunks_exact(2)
+        .enumerate()
+        .map(|(k, c)| [k as f64 + 0.4 * c[0], 0.6 * c[1]])
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn passes_through_points_and_is_c1(seed in prop::collection::vec(0.0f64..1.0, 8..30), closed: bool) {
+        let q = random_points(&seed);
+        let s = BSpline::interpolate(&q, closed, &[]).unwrap();
+        let m = s.segments.len();
+        for k in 0..m {
+            prop_assert!(close(s.point(k, 0.0), q[k], 1e-14));
+            prop_assert!(close(s.point(k, 1.0), q[(k + 1) % q.len()], 1e-12));
+        }
+        // C1 in the global parameter u at every interior join (and the
+        // closing join of a closed curve).
+        let joins = if closed { m } else { m - 1 };
+        for k in 0..joins {
+            let (a, b) = (s.du(k, 1.0), s.du((k + 1) % m, 0.0));
+            let scale = a[0].hypot(a[1]);
+            prop_assert!(close(a, b, 1e-9 * scale), "join {}: {:?} vs {:?}", k, a, b);
+        }
+    }
+
+    #[test]
+    fn grid_pieces_cover_the_curve_once(seed in prop::collection::vec(0.0f64..1.0, 8..24), h in 0.05f64..0.7, ox in 0.0f64..1.0) {
+        let q = random_points(&seed);
+        let s = BSpline::interpolate(&q, false, &[]).unwrap();
+        let grid = Grid { origin: [-1.0 - ox, -1.0], h, nx: (16.0 / h) as usize + 2, ny: (5.0 / h) as usize + 2 };
+        let pieces = split(&s, &grid);
+        // Contiguous and ordered: each piece starts where the last ended.
+        for w in pieces.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            if a.segment == b.segment {
+                prop_assert!(a.t1 == b.t0 && a.t0 < a.t1);
+            } else {
+                prop_assert!(b.segment == a.segment + 1 && a.t1 == 1.0 && b.t0 == 0.0);
+            }
+        }
+        prop_assert_eq!(pieces[0].t0, 0.0);
+        prop_assert_eq!(pieces.last().unwrap().t1, 1.0);
+        // Lengths add up to the whole curve. (Contiguity above is the exact
+        // check; this one catches pieces of the wrong length. Both sides are
+        // composite Gauss rules of a smooth speed.)
+        let total: f64 = pieces.iter().map(|p| s.length_between(p.segment, p.t0, p.t1)).sum();
+        let reference: f64 = (0..s.segments.len())
+            .flat_map(|k| (0..256).map(move |i| (k, i as f64 / 256.0, (i + 1) as f64 / 256.0)))
+            .map(|(k, a, b)| s.length_between(k, a, b))
+            .sum();
+        prop_assert!((total - reference).abs() < 1e-11 * reference, "{} vs {}", total, reference);
+        // Each piece lies in its cell.
+        for p in &pieces {
+            let (i, j) = (p.cell % grid.nx, p.cell / grid.nx);
+            let c0 = grid.cell_min(i, j);
+            for t in [0.0, 0.25, 0.5, 0.75, 1.0] {
+                let x = s.point(p.segment, p.t0 + t * (p.t1 - p.t0));
+                let tol = 1e-9 * h;
+                prop_assert!(x[0] >= c0[0] - tol && x[0] <= c0[0] + h + tol && x[1] >= c0[1] - tol && x[1] <= c0[1] + h + tol,
+                    "piece {:?} leaves cell ({}, {}) at {:?}", p, i, j, x);
+            }
+        }
+    }
+}
+
+#[test]
+fn straight_runs_stay_straight() {
+    // Points on a line, unevenly spaced: every segment is straight
+    // (zero second derivative) and parametrised at constant speed.
+    let q = [[0.0, 0.0], [0.3, 0.15], [1.0, 0.5], [1.2, 0.6], [2.0, 1.0]];
+    let s = BSpline::interpolate(&q, false, &[]).unwrap();
+    for k in 0..s.segments.len() {
+        for t in [0.0, 0.3, 0.7, 1.0] {
+            let d2 = s.d2(k, t);
+            assert!(d2[0].abs() < 1e-13 && d2[1].abs() < 1e-13, "{d2:?}");
+        }
+    }
+    assert!((s.length() - 2.0f64.hypot(1.0)).abs() < 1e-14);
+}
+
+#[test]
+fn corners_keep_the_sides_of_a_square_straight() {
+    // A closed square sampled with 3 points per side: corners are detected
+    // (both side triples collinear, the sides not) without being marked.
+    let mut q = Vec::new();
+    for k in 0..3 {
+        q.push([k as f64 / 3.0, 0.0]);
+    }
+    for k in 0..3 {
+        q.push([1.0, k as f64 / 3.0]);
+    }
+    for k in 0..3 {
+        q.push([1.0 - k as f64 / 3.0, 1.0]);
+    }
+    for k in 0..3 {
+        q.push([0.0, 1.0 - k as f64 / 3.0]);
+    }
+    let s = BSpline::interpolate(&q, true, &[]).unwrap();
+    for k in 0..s.segments.len() {
+        for t in [0.2, 0.5, 0.9] {
+            let d2 = s.d2(k, t);
+            assert!(d2[0].abs() < 1e-12 && d2[1].abs() < 1e-12, "segment {k}: {d2:?}");
+        }
+    }
+    assert!((s.signed_area() - 1.0).abs() < 1e-14 && (s.length() - 4.0).abs() < 1e-13);
+}
+
+#[test]
+fn circle_converges() {
+    // Points on the unit circle: the largest radial error falls by at least
+    // 2^3 per halving of the spacing (local cubic interpolation with
+    // estimated tangents; observed about 2^4).
+    let err = |n: usize| {
+        let q: Vec<[f64; 2]> = (0..n)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                [t.cos(), t.sin()]
+            })
+            .collect();
+        let s = BSpline::interpolate(&q, true, &[]).unwrap();
+        s.sample(20)
+            .iter()
+            .map(|p| (p[0].hypot(p[1]) - 1.0).abs())
+            .fold(0.0, f64::max)
+    };
+    let e: Vec<f64> = [8, 16, 32, 64].iter().map(|&n| err(n)).collect();
+    println!("circle radial errors for 8, 16, 32, 64 points: {e:?}");
+    for w in e.windows(2) {
+        assert!(w[0] / w[1] > 8.0, "{e:?}");
+    }
+}
+
+#[test]
+fn gauss_integration_along_a_piece_is_exact_for_polynomials() {
+    // A straight spline from (0, 0) to (3, 4) (length 5) at constant speed:
+    // the integral of s^k along it with n Gauss points is exact for k <= 2n - 1.
+    let q = [[0.0, 0.0], [1.2, 1.6], [1.8, 2.4], [3.0, 4.0]];
+    let s = BSpline::interpolate(&q, false, &[]).unwrap();
+    for n in 1..=4 {
+        let (x, w) = gauss_legendre(n);
+        for k in 0..2 * n {
+            let mut sum = 0.0;
+            for seg in 0..s.segments.len() {
+                for (xi, wi) in x.iter().zip(&w) {
+                    let t = 0.5 * (1.0 + xi);
+                    let p = s.point(seg, t);
+                    let d = s.d1(seg, t);
+                    let arc = p[0].hypot(p[1]);
+                    sum += wi * 0.5 * d[0].hypot(d[1]) * arc.powi(k as i32);
+                }
+            }
+            let exact = 5f64.powi(k as i32 + 1) / (k as f64 + 1.0);
+            assert!((sum - exact).abs() < 1e-12 * exact, "n={n} k={k}: {sum} vs {exact}");
+        }
+    }
+}
+
+#[test]
+fn curves_along_and_touching_grid_lines_split_cleanly() {
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h: 0.5,
+        nx: 8,
+        ny: 8,
+    };
+    // Along the line y = 1 through grid nodes: one piece per cell, no gaps.
+    let q = [[0.0, 1.0], [0.5, 1.0], [1.0, 1.0], [1.7, 1.0], [2.0, 1.0]];
+    let s = BSpline::interpolate(&q, false, &[]).unwrap();
+    let pieces = split(&s, &grid);
+    let total: f64 = pieces.iter().map(|p| s.length_between(p.segment, p.t0, p.t1)).sum();
+    assert!((total - 2.0).abs() < 1e-14);
+    assert_eq!(pieces.len(), 4 + 1, "{pieces:?}"); // cells of width 0.5 over [0, 2]; the 1.0-1.7 segment is cut at 1.5
+                                                   // A parabola-like arc touching y = 1.5 tangentially at its top.
+    let q = [[0.1, 1.0], [0.6, 1.375], [1.1, 1.5], [1.6, 1.375], [2.1, 1.0]];
+    let s = BSpline::interpolate(&q, false, &[]).unwrap();
+    let pieces = split(&s, &grid);
+    let total: f64 = pieces.iter().map(|p| s.length_between(p.segment, p.t0, p.t1)).sum();
+    assert!((total - s.length()).abs() < 1e-12);
+    assert!(pieces.iter().all(|p| p.t1 - p.t0 > 1e-9));
+}
