@@ -8,6 +8,18 @@ use rerun::external::re_log_encoding::DecoderApp;
 use rerun::log::{Chunk, LogMsg};
 use std::collections::BTreeMap;
 
+/// Every data chunk of the recording store in an `.rrd` file.
+fn read_chunks(path: &std::path::Path) -> Vec<Chunk> {
+    let file = std::fs::File::open(path).unwrap();
+    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
+    decoder
+        .filter_map(|msg| match msg.unwrap() {
+            LogMsg::ArrowMsg(store, arrow) if store.is_recording() => Some(Chunk::from_arrow_msg(&arrow).unwrap()),
+            _ => None,
+        })
+        .collect()
+}
+
 #[test]
 fn recording_holds_grid_points_and_metrics() {
     let mut sim = sim_with("column-small-strain", |s| s.analysis.load_steps = 2);
@@ -23,8 +35,7 @@ fn recording_holds_grid_points_and_metrics() {
     rec.finish().unwrap();
     let n_points = sim.points().len();
 
-    let file = std::fs::File::open(&path).unwrap();
-    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
+    let chunks = read_chunks(&path);
     let scalars = rerun::Scalars::descriptor_scalars().component;
     let positions = rerun::Points2D::descriptor_positions().component;
     let step_tl: rerun::TimelineName = "step".into();
@@ -32,14 +43,7 @@ fn recording_holds_grid_points_and_metrics() {
     let mut series: BTreeMap<String, BTreeMap<i64, f64>> = BTreeMap::new();
     let mut point_counts: BTreeMap<i64, usize> = BTreeMap::new();
     let mut entities = std::collections::BTreeSet::new();
-    for msg in decoder {
-        let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() else {
-            continue;
-        };
-        if !store.is_recording() {
-            continue;
-        }
-        let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+    for chunk in &chunks {
         let entity = chunk.entity_path().to_string();
         entities.insert(entity.clone());
         let steps: Vec<i64> = chunk
@@ -99,18 +103,10 @@ fn boundary_curves_are_recorded() {
     let r = sim.step().unwrap();
     rec.log_step(&r, &sim).unwrap();
     rec.finish().unwrap();
-    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(std::fs::File::open(&path).unwrap())).unwrap();
     let scalars = rerun::Scalars::descriptor_scalars().component;
     let mut entities = std::collections::BTreeSet::new();
     let mut length = None;
-    for msg in decoder {
-        let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() else {
-            continue;
-        };
-        if !store.is_recording() {
-            continue;
-        }
-        let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+    for chunk in read_chunks(&path) {
         let e = chunk.entity_path().to_string();
         if e == "/metrics/boundary/inner/length" {
             length = chunk.iter_slices::<f64>(scalars).next().map(|v| v[0]);
