@@ -155,36 +155,11 @@ impl Mapping {
         }
     }
 
-    /// The sparsity pattern of the reduced stiffness for these groups.
+    /// The sparsity pattern of the reduced (symmetric) stiffness for these
+    /// groups, lower triangle.
     pub fn pattern(&self) -> Pattern {
-        let mut pairs = Vec::new();
-        let mut local = Vec::with_capacity(self.groups.len());
-        for g in &self.groups {
-            let dofs = self.group_dofs(g);
-            let mut l = Vec::new();
-            for (c, dc) in dofs.iter().enumerate() {
-                let Dof::Free(col) = *dc else { continue };
-                for (r, dr) in dofs.iter().enumerate() {
-                    if let Dof::Free(row) = *dr {
-                        if row >= col {
-                            pairs.push(Pair::new(row, col));
-                            l.push((r as u16, c as u16));
-                        }
-                    }
-                }
-            }
-            local.push(l);
-        }
-        let n = self.dofs.n_free;
-        let (symbolic, argsort) =
-            SymbolicSparseColMat::try_new_from_indices(n, n, &pairs).expect("indices are in range by construction");
-        Pattern {
-            n,
-            symbolic,
-            argsort,
-            local,
-            len: pairs.len(),
-        }
+        let blocks: Vec<&[usize]> = self.groups.iter().map(|g| g.nodes.as_slice()).collect();
+        Pattern::new(&self.dofs, &blocks, Storage::Lower)
     }
 
     /// The dofs of a group's nodes, `[x0, y0, x1, y1, ...]`.
@@ -232,34 +207,83 @@ impl Mapping {
     }
 }
 
+/// Which entries of the reduced matrix a [`Pattern`] stores.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Storage {
+    /// The lower triangle of a symmetric matrix (what the Cholesky reads).
+    Lower,
+    /// Every entry (non-symmetric tangents, LU).
+    Full,
+}
+
+fn block_dofs(dofs: &DofMap, nodes: &[usize]) -> Vec<Dof> {
+    nodes.iter().flat_map(|&n| dofs.node_dof[n]).collect()
+}
+
 impl Pattern {
-    /// Assemble the reduced stiffness (lower triangle) and the coupling
-    /// `K_fc du_c` of free rows to prescribed increments.
-    pub fn assemble(
+    /// The pattern of a matrix assembled from dense blocks, each over a list
+    /// of nodes (a stencil group, a ghost face's six nodes, ...): the
+    /// free-free entries of every block, in triplet order.
+    pub fn new(dofs: &DofMap, blocks: &[&[usize]], storage: Storage) -> Pattern {
+        let mut pairs = Vec::new();
+        let mut local = Vec::with_capacity(blocks.len());
+        for nodes in blocks {
+            let bd = block_dofs(dofs, nodes);
+            let mut l = Vec::new();
+            for (c, dc) in bd.iter().enumerate() {
+                let Dof::Free(col) = *dc else { continue };
+                for (r, dr) in bd.iter().enumerate() {
+                    if let Dof::Free(row) = *dr {
+                        if storage == Storage::Full || row >= col {
+                            pairs.push(Pair::new(row, col));
+                            l.push((r as u16, c as u16));
+                        }
+                    }
+                }
+            }
+            local.push(l);
+        }
+        let n = dofs.n_free;
+        let (symbolic, argsort) =
+            SymbolicSparseColMat::try_new_from_indices(n, n, &pairs).expect("indices are in range by construction");
+        Pattern {
+            n,
+            symbolic,
+            argsort,
+            local,
+            len: pairs.len(),
+        }
+    }
+
+    /// Assemble from dense blocks: `fill(b, out)` writes block `b`'s
+    /// row-major `2m x 2m` matrix into `out` (resized by the caller's
+    /// closure). Returns the reduced matrix and `K_fc du_c`, the coupling of
+    /// free rows to this step's prescribed increments.
+    pub fn assemble_with(
         &self,
-        map: &Mapping,
-        pts: &Points,
-        d_of: &impl Fn(usize) -> [[f64; 3]; 3],
+        dofs: &DofMap,
+        blocks: &[&[usize]],
+        mut fill: impl FnMut(usize, &mut Vec<f64>),
     ) -> (SparseColMat<usize, f64>, Vec<f64>) {
         let mut values = Vec::with_capacity(self.len);
         let mut coupling = vec![0.0; self.n];
-        let mut kg = Vec::new();
-        for (g, local) in map.groups.iter().zip(&self.local) {
-            map.group_stiffness(g, pts, d_of, &mut kg);
-            let m2 = 2 * g.nodes.len();
+        let mut kb = Vec::new();
+        for (b, (nodes, local)) in blocks.iter().zip(&self.local).enumerate() {
+            fill(b, &mut kb);
+            let m2 = 2 * nodes.len();
             for &(r, c) in local {
-                values.push(kg[r as usize * m2 + c as usize]);
+                values.push(kb[r as usize * m2 + c as usize]);
             }
-            let dofs = map.group_dofs(g);
-            for (c, dc) in dofs.iter().enumerate() {
+            let bd = block_dofs(dofs, nodes);
+            for (c, dc) in bd.iter().enumerate() {
                 let Dof::Fixed(k) = *dc else { continue };
-                let du = map.dofs.constrained[k].2;
+                let du = dofs.constrained[k].2;
                 if du == 0.0 {
                     continue;
                 }
-                for (r, dr) in dofs.iter().enumerate() {
+                for (r, dr) in bd.iter().enumerate() {
                     if let Dof::Free(row) = *dr {
-                        coupling[row] += kg[r * m2 + c] * du;
+                        coupling[row] += kb[r * m2 + c] * du;
                     }
                 }
             }
@@ -267,5 +291,19 @@ impl Pattern {
         let k = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, &values)
             .expect("allocation of the stiffness matrix");
         (k, coupling)
+    }
+
+    /// Assemble the reduced small-strain stiffness (lower triangle) of the
+    /// mapping's groups and the coupling `K_fc du_c`.
+    pub fn assemble(
+        &self,
+        map: &Mapping,
+        pts: &Points,
+        d_of: &impl Fn(usize) -> [[f64; 3]; 3],
+    ) -> (SparseColMat<usize, f64>, Vec<f64>) {
+        let blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+        self.assemble_with(&map.dofs, &blocks, |b, out| {
+            map.group_stiffness(&map.groups[b], pts, d_of, out)
+        })
     }
 }

@@ -25,6 +25,7 @@ pub mod colormap;
 pub mod exact;
 pub mod field;
 pub mod geometry;
+pub mod ghost;
 pub mod grid;
 pub mod linalg;
 pub mod material;

@@ -1,6 +1,8 @@
 //! Constitutive models. Stress and strain use Voigt order `[xx, yy, xy]`
 //! with engineering shear strain `gamma_xy = 2 e_xy`.
 
+pub mod hencky;
+
 use crate::scene::Plane;
 
 /// Isotropic linear elasticity: Young's modulus `e` (Pa), Poisson's ratio

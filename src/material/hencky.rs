@@ -1,0 +1,183 @@
+//! Finite-strain elasto-plasticity: Hencky (logarithmic) elasticity with
+//! linear Kirchhoff stress and von Mises perfect plasticity, return map in
+//! principal logarithmic strain space (G section 2.1; Charlton, Coombs &
+//! Augarde 2017; AMPLE), plane strain.
+//!
+//! For a step's deformation gradient increment `dF` (in-plane, `dF_zz = 1`)
+//! and the elastic left Cauchy-Green tensor at the start of the step `b_n`:
+//! `b_tr = dF b_n dF^T = Q diag(l_a) Q^T`, trial strains `e_a = ln(l_a)/2`,
+//! Kirchhoff stress `t_a = K sum(e) + 2 mu dev(e)_a`; if `rho = |dev t| > rho_y`
+//! the deviator is scaled back to the yield surface (radial return).
+//!
+//! The tangent is that of `P = t dF^-T` (the force per original volume
+//! against the start-of-step gradients) with respect to `dF`, obtained from
+//! the Daleckii-Krein form of the derivatives of isotropic tensor functions
+//! in the eigenbasis of `b_tr`: `d ln b` has off-diagonal factors
+//! `(ln l_a - ln l_b)/(l_a - l_b)` (-> `1/l_a` for repeated eigenvalues,
+//! evaluated stably) and `dt` has `(t_a - t_b)/(e_a - e_b) = 2 mu c` with
+//! `c = rho_y/rho_tr` when yielding, 1 otherwise. Repeated eigenvalues need
+//! no special case. It is the same tangent as G's spatial
+//! `a = (1/2J) D L T - s_il d_jk` written against the start-of-step
+//! configuration, and the tests check it by finite differences.
+
+use nalgebra::{Matrix2, Matrix3};
+
+/// Elastic constants and optional yield strength `rho_y = sqrt(2 J2)` (Pa).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hencky {
+    pub e: f64,
+    pub nu: f64,
+    pub yield_stress: Option<f64>,
+}
+
+/// The response at one point for one trial `dF`.
+#[derive(Clone, Debug)]
+pub struct Response {
+    /// Kirchhoff stress (3 x 3, `t_xz = t_yz = 0`).
+    pub tau: Matrix3<f64>,
+    /// Elastic left Cauchy-Green tensor after the return map.
+    pub b_e: Matrix3<f64>,
+    /// `P = tau dF^-T`, in-plane.
+    pub p: Matrix2<f64>,
+    /// `A[i][j][k][l] = dP_ij / d dF_kl`, in-plane.
+    pub a: [[[[f64; 2]; 2]; 2]; 2],
+    /// Plastic dissipation density of this increment (J per original m^3):
+    /// `tau : d e_p` in principal space.
+    pub dissipation: f64,
+    pub yielding: bool,
+}
+
+/// Eigen-decomposition of a plane-strain symmetric tensor (in-plane block
+/// and the zz value): rotation angle of the in-plane eigenvectors and
+/// eigenvalues `[l1, l2, l_zz]`.
+fn eig_plane(b: &Matrix3<f64>) -> (Matrix3<f64>, [f64; 3]) {
+    let (a, c, d) = (b[(0, 0)], b[(0, 1)], b[(1, 1)]);
+    let m = 0.5 * (a + d);
+    let r = (0.25 * (a - d) * (a - d) + c * c).sqrt();
+    let th = 0.5 * (2.0 * c).atan2(a - d);
+    let (s, co) = th.sin_cos();
+    let q = Matrix3::new(co, -s, 0.0, s, co, 0.0, 0.0, 0.0, 1.0);
+    (q, [m + r, m - r, b[(2, 2)]])
+}
+
+/// `(ln x - ln y)/(x - y)`, continuous through `x = y` (-> `1/y`).
+fn log_divided_difference(x: f64, y: f64) -> f64 {
+    let t = x / y - 1.0;
+    if t.abs() < 1e-300 {
+        1.0 / y
+    } else if t.abs() < 1e-4 {
+        // ln(1+t)/t by its series: exact to round-off here.
+        (1.0 - t / 2.0 + t * t / 3.0 - t * t * t / 4.0) / y
+    } else {
+        t.ln_1p() / (t * y)
+    }
+}
+
+impl Hencky {
+    fn moduli(&self) -> (f64, f64) {
+        (self.e / (3.0 * (1.0 - 2.0 * self.nu)), self.e / (2.0 * (1.0 + self.nu)))
+    }
+
+    /// Principal return map: Kirchhoff principal stresses, elastic principal
+    /// strains, the 3 x 3 principal tangent `d t / d e`, the shear factor `c`.
+    fn principal(&self, e_tr: [f64; 3]) -> ([f64; 3], [f64; 3], Matrix3<f64>, f64, bool) {
+        let (k, mu) = self.moduli();
+        let vol = e_tr[0] + e_tr[1] + e_tr[2];
+        let dev = e_tr.map(|e| e - vol / 3.0);
+        let s_tr = dev.map(|e| 2.0 * mu * e);
+        let rho = (s_tr.iter().map(|s| s * s).sum::<f64>()).sqrt();
+        let one = Matrix3::from_element(1.0);
+        let idev = Matrix3::identity() - one / 3.0;
+        match self.yield_stress {
+            Some(ry) if rho > ry => {
+                let c = ry / rho;
+                let n = nalgebra::Vector3::new(s_tr[0] / rho, s_tr[1] / rho, s_tr[2] / rho);
+                let s = s_tr.map(|v| v * c);
+                let tau = [0, 1, 2].map(|a| k * vol + s[a]);
+                let e_e = [0, 1, 2].map(|a| vol / 3.0 + s[a] / (2.0 * mu));
+                let d = one * k + (idev - n * n.transpose()) * (2.0 * mu * c);
+                (tau, e_e, d, c, true)
+            }
+            _ => {
+                let tau = [0, 1, 2].map(|a| k * vol + s_tr[a]);
+                (tau, e_tr, one * k + idev * (2.0 * mu), 1.0, false)
+            }
+        }
+    }
+
+    /// Stress, updated elastic state and tangent for the increment `df`
+    /// from the elastic left Cauchy-Green tensor `b_n`.
+    pub fn respond(&self, df: &Matrix2<f64>, b_n: &Matrix3<f64>) -> Response {
+        let f3 = Matrix3::new(df[(0, 0)], df[(0, 1)], 0.0, df[(1, 0)], df[(1, 1)], 0.0, 0.0, 0.0, 1.0);
+        let b_tr = f3 * b_n * f3.transpose();
+        let (q, l) = eig_plane(&b_tr);
+        let e_tr = l.map(|v| 0.5 * v.ln());
+        let (tau_p, e_e, dp, c, yielding) = self.principal(e_tr);
+        let (_, mu) = self.moduli();
+        let tau = q * Matrix3::from_diagonal(&nalgebra::Vector3::from(tau_p)) * q.transpose();
+        let b_e = q * Matrix3::from_diagonal(&nalgebra::Vector3::from(e_e.map(|e| (2.0 * e).exp()))) * q.transpose();
+        let dissipation = (0..3).map(|a| tau_p[a] * (e_tr[a] - e_e[a])).sum::<f64>();
+        let finv = f3.try_inverse().unwrap_or_else(|| Matrix3::from_element(f64::NAN));
+        let finv_t = finv.transpose();
+        let p3 = tau * finv_t;
+        // d tau for a symmetric perturbation db of b_tr.
+        let g = |a: usize, b: usize| log_divided_difference(l[a], l[b]);
+        let dtau = |db: &Matrix3<f64>| {
+            let bp = q.transpose() * db * q;
+            let mut ep = Matrix3::zeros();
+            for a in 0..3 {
+                for b in 0..3 {
+                    ep[(a, b)] = 0.5 * g(a, b) * bp[(a, b)];
+                }
+            }
+            let mut tp = Matrix3::zeros();
+            for a in 0..3 {
+                for b in 0..3 {
+                    tp[(a, b)] = if a == b {
+                        (0..3).map(|m| dp[(a, m)] * ep[(m, m)]).sum()
+                    } else {
+                        2.0 * mu * c * ep[(a, b)]
+                    };
+                }
+            }
+            q * tp * q.transpose()
+        };
+        let bn_ft = b_n * f3.transpose();
+        let mut a = [[[[0.0; 2]; 2]; 2]; 2];
+        for k in 0..2 {
+            for l2 in 0..2 {
+                let mut e = Matrix3::zeros();
+                e[(k, l2)] = 1.0;
+                let db = e * bn_ft + (e * bn_ft).transpose();
+                let dt = dtau(&db);
+                let dp3 = dt * finv_t - tau * finv_t * e.transpose() * finv_t;
+                for i in 0..2 {
+                    for j in 0..2 {
+                        a[i][j][k][l2] = dp3[(i, j)];
+                    }
+                }
+            }
+        }
+        Response {
+            tau,
+            b_e,
+            p: Matrix2::new(p3[(0, 0)], p3[(0, 1)], p3[(1, 0)], p3[(1, 1)]),
+            a,
+            dissipation,
+            yielding,
+        }
+    }
+}
+
+/// Right stretch `U` of a 2 x 2 deformation gradient (`F = R U`).
+pub fn right_stretch(f: &Matrix2<f64>) -> Matrix2<f64> {
+    let c = f.transpose() * f;
+    let (a, b, d) = (c[(0, 0)], c[(0, 1)], c[(1, 1)]);
+    let m = 0.5 * (a + d);
+    let r = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    let th = 0.5 * (2.0 * b).atan2(a - d);
+    let (s, co) = th.sin_cos();
+    let q = Matrix2::new(co, -s, s, co);
+    let l = Matrix2::new((m + r).sqrt(), 0.0, 0.0, (m - r).max(0.0).sqrt());
+    q * l * q.transpose()
+}
