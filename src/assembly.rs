@@ -8,7 +8,7 @@
 //! through a [`Pattern`] built once per step (faer triplet indices with their
 //! argsort), so refilling values for another iteration is a copy.
 
-use crate::basis::{stencil, Stencil};
+use crate::basis::{stencil, BasisKind, Stencil};
 use crate::grid::Grid;
 use crate::model::{Body, GridDirichlet, GridTarget};
 use crate::points::Points;
@@ -63,7 +63,8 @@ pub struct Mapping {
     pub stencils: Vec<Stencil>,
     pub groups: Vec<Group>,
     pub dofs: DofMap,
-    /// Cells that contain at least one point with volume.
+    /// Cells a point's basis reaches into (standard: the cell holding it;
+    /// GIMP: every cell its domain overlaps): the elements of G 4.2.
     pub active_cells: Vec<usize>,
 }
 
@@ -95,11 +96,32 @@ impl Mapping {
                 active[n] = true;
             }
         }
+        // Active cells: those a point's basis reaches into: its own cell
+        // (standard), or every cell its GIMP domain overlaps by more than
+        // round-off (the cells whose nodes it weights).
         let mut cells = vec![false; grid.num_cells()];
         for p in 0..pts.len() {
-            if pts.vol[p] > 0.0 {
-                if let Some((i, j)) = grid.cell_of(pts.x[p]) {
-                    cells[j * grid.nx + i] = true;
+            if pts.vol[p] == 0.0 {
+                continue;
+            }
+            match bodies[pts.body[p]].basis {
+                BasisKind::Standard => {
+                    if let Some((i, j)) = grid.cell_of(pts.x[p]) {
+                        cells[j * grid.nx + i] = true;
+                    }
+                }
+                BasisKind::Gimp => {
+                    let range = |d: usize, n: usize| {
+                        let s = |v: f64| (v - grid.origin[d]) / grid.h;
+                        let lo = (s(pts.x[p][d] - pts.lp[p][d]) + 1e-12).floor().max(0.0) as usize;
+                        let hi = ((s(pts.x[p][d] + pts.lp[p][d]) - 1e-12).ceil().max(1.0) as usize).min(n);
+                        lo..hi.max(lo + 1).min(n)
+                    };
+                    for j in range(1, grid.ny) {
+                        for i in range(0, grid.nx) {
+                            cells[j * grid.nx + i] = true;
+                        }
+                    }
                 }
             }
         }

@@ -165,3 +165,19 @@ fn face_matrix(grid: &Grid, a: usize, b: usize) -> GhostFace {
         j,
     }
 }
+
+impl GhostFace {
+    /// `gamma (J (x) I_2)` as a row-major 12 x 12 matrix over the face's
+    /// nodes `[x0, y0, x1, y1, ...]`.
+    pub fn stiffness(&self, gamma: f64, out: &mut Vec<f64>) {
+        out.clear();
+        out.resize(144, 0.0);
+        for r in 0..6 {
+            for c in 0..6 {
+                let v = gamma * self.j[r][c];
+                out[(2 * r) * 12 + 2 * c] = v;
+                out[(2 * r + 1) * 12 + 2 * c + 1] = v;
+            }
+        }
+    }
+}

@@ -30,6 +30,7 @@ pub mod grid;
 pub mod linalg;
 pub mod material;
 pub mod model;
+mod newton;
 pub mod points;
 pub mod quadrature;
 pub mod record;

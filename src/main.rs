@@ -142,9 +142,12 @@ fn list(dir: &Path) -> Result<ExitCode> {
 
 fn header(first: Option<&StepReport>) -> String {
     let mut h = format!(
-        "{:>5} {:>7} {:>8} {:>10} {:>10} {:>18} {:>11} {:>11}",
-        "step", "lambda", "unknowns", "residual", "cond(K)", "method", "strain U", "work W"
+        "{:>5} {:>7} {:>8} {:>5} {:>10} {:>10} {:>18} {:>11} {:>11}",
+        "step", "lambda", "unknowns", "iters", "residual", "cond(K)", "method", "strain U", "work W"
     );
+    if first.is_some_and(|r| r.condition_unstabilised.is_some()) {
+        h.push_str(&format!(" {:>12}", "cond no-ghost"));
+    }
     for e in first.map(|r| r.errors.as_slice()).unwrap_or(&[]) {
         h.push_str(&format!(" {:>15}", e.name));
     }
@@ -160,16 +163,20 @@ fn row(r: &StepReport) -> String {
         (format!("{:.3e}", c.value), c.method.label())
     });
     let mut s = format!(
-        "{:>5} {:>7.4} {:>8} {:>10.3e} {:>10} {:>18} {:>11.4e} {:>11.4e}",
+        "{:>5} {:>7.4} {:>8} {:>5} {:>10.3e} {:>10} {:>18} {:>11.4e} {:>11.4e}",
         r.step,
         r.load_factor,
         r.unknowns,
+        r.iterations,
         r.residuals.last().copied().unwrap_or(f64::NAN),
         cond,
         method,
         r.energy.strain,
         r.energy.external_work
     );
+    if let Some(c) = r.condition_unstabilised {
+        s.push_str(&format!(" {:>12.3e}", c.value));
+    }
     for e in &r.errors {
         s.push_str(&format!(" {:>15.4e}", e.value));
     }

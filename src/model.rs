@@ -58,6 +58,8 @@ pub struct Model {
     pub description: String,
     pub grid: Grid,
     pub materials: Vec<LinearElastic>,
+    /// Von Mises yield strength per material (`None`: elastic).
+    pub yield_stress: Vec<Option<f64>>,
     pub material_names: Vec<String>,
     pub bodies: Vec<Body>,
     pub points: Points,
@@ -91,6 +93,7 @@ impl Model {
         let grid = build_grid(scene)?;
 
         let mut materials = Vec::new();
+        let mut yield_stress = Vec::new();
         let mut material_names: Vec<String> = Vec::new();
         if scene.materials.is_empty() {
             return Err(FieldError::new("material", "at least one [[material]] is needed"));
@@ -103,7 +106,40 @@ impl Model {
                     format!("material `{}` is defined twice", m.name),
                 ));
             }
-            let MaterialModel::LinearElastic = m.model;
+            let ys = match m.model {
+                MaterialModel::LinearElastic => {
+                    if m.yield_stress.is_some() {
+                        return Err(FieldError::new(f("yield_stress"), "only for model = \"von-mises\""));
+                    }
+                    None
+                }
+                MaterialModel::VonMises => {
+                    if scene.analysis.kind != crate::scene::AnalysisKind::QuasiStaticFinite {
+                        return Err(FieldError::new(
+                            f("model"),
+                            "von Mises plasticity needs kind = \"quasi-static-finite\"",
+                        ));
+                    }
+                    match m.yield_stress {
+                        Some(y) if y > 0.0 && y.is_finite() => Some(y),
+                        _ => {
+                            return Err(FieldError::new(
+                                f("yield_stress"),
+                                "von Mises needs a positive yield_stress",
+                            ))
+                        }
+                    }
+                }
+            };
+            if scene.analysis.kind == crate::scene::AnalysisKind::QuasiStaticFinite
+                && m.plane != crate::scene::Plane::Strain
+            {
+                return Err(FieldError::new(
+                    f("plane"),
+                    "the finite-deformation analysis is plane strain",
+                ));
+            }
+            yield_stress.push(ys);
             if !(m.e > 0.0 && m.e.is_finite()) {
                 return Err(FieldError::new(
                     f("E"),
@@ -307,6 +343,12 @@ impl Model {
         if !(a.tolerance > 0.0 && a.tolerance < 1.0) {
             return Err(FieldError::new("analysis.tolerance", "must lie in (0, 1)"));
         }
+        if !(1..=1000).contains(&a.max_iterations) {
+            return Err(FieldError::new("analysis.max_iterations", "must be between 1 and 1000"));
+        }
+        if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
+            return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
+        }
 
         let exact = match &scene.exact {
             None => None,
@@ -330,6 +372,7 @@ impl Model {
             description: scene.scene.description.trim().to_string(),
             grid,
             materials,
+            yield_stress,
             material_names,
             bodies,
             points,
@@ -415,6 +458,22 @@ fn build_exact(
                 base,
                 top,
                 material,
+            })
+        }
+        ExactSpec::ColumnFinite { base, top } => {
+            if !(top > base) {
+                return Err(FieldError::new("exact.top", "must exceed `base`"));
+            }
+            if gravity[0] != 0.0 || !(gravity[1] < 0.0) {
+                return Err(FieldError::new(
+                    "loads.gravity",
+                    "the column solution needs gravity = [0, -g] with g > 0",
+                ));
+            }
+            Ok(ExactSolution::ColumnFinite {
+                rho_g: -material.density * gravity[1],
+                base,
+                top,
             })
         }
         ExactSpec::ConfinedY { stress_yy, base } => Ok(ExactSolution::ConfinedY {

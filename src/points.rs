@@ -23,6 +23,18 @@ pub struct Points {
     pub lp: Vec<P2>,
     /// Index of the body the point belongs to.
     pub body: Vec<usize>,
+    /// Deformation gradient `[xx, xy, yx, yy]` (finite deformation).
+    pub def_grad: Vec<[f64; 4]>,
+    /// Elastic left Cauchy-Green tensor `[xx, yy, xy, zz]` (finite deformation).
+    pub b_e: Vec<[f64; 4]>,
+    /// Out-of-plane Cauchy stress (Pa).
+    pub szz: Vec<f64>,
+    /// Plastic work dissipated so far (J per unit thickness).
+    pub dissipation: Vec<f64>,
+    /// Whether the last step yielded.
+    pub yielding: Vec<bool>,
+    /// GIMP half-lengths at generation (m).
+    pub lp0: Vec<P2>,
 }
 
 impl Points {
@@ -49,5 +61,11 @@ impl Points {
         self.strain.push([0.0; 3]);
         self.lp.push(lp);
         self.body.push(body);
+        self.def_grad.push([1.0, 0.0, 0.0, 1.0]);
+        self.b_e.push([1.0, 1.0, 0.0, 1.0]);
+        self.szz.push(0.0);
+        self.dissipation.push(0.0);
+        self.yielding.push(false);
+        self.lp0.push(lp);
     }
 }

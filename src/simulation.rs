@@ -14,10 +14,11 @@
 //! Failures (singular system, residual above tolerance, non-finite values)
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
-use crate::assembly::{Dof, Mapping};
+use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::boundary::{self, bspline::BSpline, BoundaryReport};
 use crate::exact::ErrorNorm;
 use crate::geometry::P2;
+use crate::ghost;
 use crate::linalg::{self, Condition};
 use crate::material::mul3;
 use crate::model::Model;
@@ -29,11 +30,15 @@ use std::time::Instant;
 /// Settings that may change between steps.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Params {
-    /// Largest accepted relative residual `|K du - r| / |r|`.
+    /// Largest accepted relative residual (see [`crate::scene::AnalysisSpec::tolerance`]).
     pub tolerance: f64,
     pub condition: ConditionMode,
     /// Largest reduced system whose condition number is computed densely.
     pub dense_limit: usize,
+    /// Newton iterations per step at most.
+    pub max_iterations: usize,
+    /// Ghost stiffness penalty `gamma_K` (0: off).
+    pub gamma_k: f64,
 }
 
 /// Wall-clock time of each phase of a step (s).
@@ -54,6 +59,8 @@ pub struct Energy {
     pub strain: f64,
     /// Work of loads and supports, trapezoidal in each step.
     pub external_work: f64,
+    /// Plastic work dissipated so far.
+    pub plastic_dissipation: f64,
 }
 
 /// What one successful step did.
@@ -76,6 +83,12 @@ pub struct StepReport {
     pub timings: Timings,
     pub energy: Energy,
     pub condition: Option<Condition>,
+    /// With ghost stabilisation: the condition number of the tangent without it.
+    pub condition_unstabilised: Option<Condition>,
+    /// Newton iterations of this step (1 for a linear step).
+    pub iterations: usize,
+    /// Faces carrying ghost stabilisation this step.
+    pub ghost_faces: usize,
     /// Errors against the scene's exact solution, if it names one.
     pub errors: Vec<ErrorNorm>,
     /// Largest nodal displacement increment of the step (m).
@@ -171,11 +184,15 @@ impl std::error::Error for StepFailure {}
 
 /// The evolving part of a simulation.
 #[derive(Clone, Debug)]
-struct State {
-    points: Points,
-    step: usize,
-    external_work: f64,
-    active_cells: Vec<usize>,
+pub(crate) struct State {
+    pub(crate) points: Points,
+    pub(crate) step: usize,
+    pub(crate) external_work: f64,
+    pub(crate) active_cells: Vec<usize>,
+    /// Ghost faces of the last step, as segments (for observers).
+    pub(crate) ghost_faces: Vec<(P2, P2)>,
+    /// Newton iterations over all steps so far.
+    pub(crate) iterations: usize,
 }
 
 /// A saved state to return to with [`Simulation::restore`].
@@ -184,9 +201,9 @@ pub struct Snapshot(State);
 
 /// A model and its evolving state.
 pub struct Simulation {
-    model: Model,
-    params: Params,
-    state: State,
+    pub(crate) model: Model,
+    pub(crate) params: Params,
+    pub(crate) state: State,
 }
 
 impl Simulation {
@@ -195,6 +212,8 @@ impl Simulation {
             tolerance: model.analysis.tolerance,
             condition: model.analysis.condition,
             dense_limit: model.analysis.dense_limit,
+            max_iterations: model.analysis.max_iterations,
+            gamma_k: model.analysis.gamma_k,
         };
         let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
         let state = State {
@@ -202,6 +221,8 @@ impl Simulation {
             step: 0,
             external_work: 0.0,
             active_cells: map.active_cells,
+            ghost_faces: Vec::new(),
+            iterations: 0,
         };
         Simulation { model, params, state }
     }
@@ -237,6 +258,11 @@ impl Simulation {
         &self.state.active_cells
     }
 
+    /// Ghost faces of the last step (empty without ghost stabilisation).
+    pub fn ghost_faces(&self) -> &[(P2, P2)] {
+        &self.state.ghost_faces
+    }
+
     pub fn finished(&self) -> bool {
         self.state.step >= self.load_steps()
     }
@@ -265,6 +291,9 @@ impl Simulation {
                 steps: self.load_steps(),
             });
         }
+        if self.model.analysis.kind == crate::scene::AnalysisKind::QuasiStaticFinite {
+            return crate::newton::finite_step(self);
+        }
         let step = self.state.step + 1;
         let lambda0 = self.state.step as f64 / self.load_steps() as f64;
         let lambda1 = step as f64 / self.load_steps() as f64;
@@ -280,7 +309,27 @@ impl Simulation {
             lambda1 - lambda0,
         );
         let d_of = |p: usize| self.model.materials[self.model.bodies[self.state.points.body[p]].material].d_matrix();
-        let (k, coupling) = map.pattern().assemble(&map, &self.state.points, &d_of);
+        // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
+        let gamma = self.params.gamma_k;
+        let faces = if gamma > 0.0 {
+            ghost::faces(&self.model.grid, &map.active_cells)
+        } else {
+            Vec::new()
+        };
+        let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+        blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+        let ng = map.groups.len();
+        let stiffness = |with_ghost: bool| {
+            pattern.assemble_with(&map.dofs, &blocks, |b, out| {
+                if b < ng {
+                    map.group_stiffness(&map.groups[b], &self.state.points, &d_of, out)
+                } else {
+                    faces[b - ng].stiffness(if with_ghost { gamma } else { 0.0 }, out)
+                }
+            })
+        };
+        let (k, coupling) = stiffness(true);
         let (forces, boundaries) = self.nodal_forces(&map, step, lambda1)?;
         let rhs: Vec<f64> = (0..map.dofs.n_free)
             .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
@@ -346,6 +395,26 @@ impl Simulation {
             ConditionMode::Dense => Some(linalg::condition(&k, &factor, usize::MAX)),
             ConditionMode::Lanczos => Some(linalg::condition(&k, &factor, 0)),
         };
+        // Without the ghost term, for comparison (infinite when singular).
+        let condition_unstabilised = match (&condition, faces.is_empty()) {
+            (Some(c), false) => {
+                let (k0, _) = stiffness(false);
+                let limit = match self.params.condition {
+                    ConditionMode::Dense => usize::MAX,
+                    ConditionMode::Lanczos => 0,
+                    _ => self.params.dense_limit,
+                };
+                Some(match linalg::cholesky(&k0) {
+                    Ok(f0) => linalg::condition(&k0, &f0, limit),
+                    Err(_) => Condition {
+                        value: f64::INFINITY,
+                        lambda_min: 0.0,
+                        ..*c
+                    },
+                })
+            }
+            _ => None,
+        };
         timings.condition = t.elapsed().as_secs_f64();
 
         // 5. Update the points.
@@ -390,6 +459,8 @@ impl Simulation {
         self.state.step = step;
         self.state.external_work += work;
         self.state.active_cells = map.active_cells.clone();
+        self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
+        self.state.iterations += 1;
         let errors = match &self.model.exact {
             Some(e) => e.errors(&self.state.points, lambda1),
             None => Vec::new(),
@@ -408,8 +479,12 @@ impl Simulation {
             energy: Energy {
                 strain: strain_energy,
                 external_work: self.state.external_work,
+                plastic_dissipation: 0.0,
             },
             condition,
+            condition_unstabilised,
+            iterations: 1,
+            ghost_faces: faces.len(),
             errors,
             max_increment,
             boundaries,
@@ -429,7 +504,7 @@ impl Simulation {
     /// boundary tractions on the current curves) and internal force of the
     /// current stresses, on the free dofs, and the internal force on the
     /// prescribed ones; with a report per boundary.
-    fn nodal_forces(
+    pub(crate) fn nodal_forces(
         &self,
         map: &Mapping,
         step: usize,
@@ -531,10 +606,13 @@ impl Simulation {
     }
 }
 
-struct Forces {
-    ext: Vec<f64>,
-    int: Vec<f64>,
-    int_fixed: Vec<f64>,
+pub(crate) struct Forces {
+    /// External force per unit load factor on the free dofs.
+    pub(crate) ext: Vec<f64>,
+    /// Internal force of the current stresses on the free dofs.
+    pub(crate) int: Vec<f64>,
+    /// Internal force on the prescribed dofs.
+    pub(crate) int_fixed: Vec<f64>,
 }
 
 /// Increment of every grid node: solved values on free dofs, prescribed

@@ -9,6 +9,9 @@
 //! | `grid` | LineStrips2D | static |
 //! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume | every step |
+//! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | every step |
+//! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
+//! | `metrics/newton/iterations`, `metrics/ghost/faces`, `metrics/energy/plastic_dissipation` | Scalars | every step |
 //! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | every step |
 //! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | every step |
 //! | `metrics/boundary/<name>/{length,area,cells_cut,resultant_x,resultant_y}` | Scalars | every step |
@@ -170,6 +173,15 @@ impl Recorder {
             "grid/active",
             &rerun::LineStrips2D::new(boxes).with_colors([rerun::Color::from_rgb(60, 120, 200)]),
         ))?;
+        let ghost: Vec<Vec<[f32; 2]>> = sim
+            .ghost_faces()
+            .iter()
+            .map(|(a, b)| vec![[a[0] as f32, a[1] as f32], [b[0] as f32, b[1] as f32]])
+            .collect();
+        self.check(self.rec.log(
+            "grid/ghost_faces",
+            &rerun::LineStrips2D::new(ghost).with_colors([rerun::Color::from_rgb(240, 140, 20)]),
+        ))?;
         for ((name, spline), b) in sim.boundary_splines().into_iter().zip(&sim.model().boundaries) {
             let Some(s) = spline else { continue };
             let color = if b.traction.is_some() {
@@ -210,6 +222,13 @@ impl Recorder {
             self.scalar("metrics/condition/stiffness", c.value)?;
             self.scalar("metrics/log10/condition/stiffness", c.value.log10())?;
         }
+        if let Some(c) = &report.condition_unstabilised {
+            self.scalar("metrics/condition/stiffness_unstabilised", c.value)?;
+            self.scalar("metrics/log10/condition/stiffness_unstabilised", c.value.log10())?;
+        }
+        self.scalar("metrics/newton/iterations", report.iterations as f64)?;
+        self.scalar("metrics/ghost/faces", report.ghost_faces as f64)?;
+        self.scalar("metrics/energy/plastic_dissipation", report.energy.plastic_dissipation)?;
         self.scalar("metrics/energy/strain", report.energy.strain)?;
         self.scalar("metrics/energy/external_work", report.energy.external_work)?;
         for e in &report.errors {

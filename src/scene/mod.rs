@@ -71,8 +71,13 @@ pub enum Plane {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MaterialModel {
+    /// Linear elasticity; under the finite-deformation analysis, Hencky
+    /// elasticity (linear Kirchhoff stress in logarithmic strain).
     #[default]
     LinearElastic,
+    /// Hencky elasticity with von Mises perfect plasticity (finite
+    /// deformation analysis only); needs `yield_stress`.
+    VonMises,
 }
 
 /// `[[material]]`: Young's modulus `E` (Pa), Poisson's ratio `nu`, mass
@@ -90,6 +95,9 @@ pub struct MaterialSpec {
     pub density: f64,
     #[serde(default)]
     pub plane: Plane,
+    /// Von Mises yield strength `rho_y = sqrt(2 J2)` of the Kirchhoff stress (Pa).
+    #[serde(default)]
+    pub yield_stress: Option<f64>,
 }
 
 /// Where a body's points go inside each cell.
@@ -277,6 +285,9 @@ pub enum AnalysisKind {
     /// configuration (B, C).
     #[default]
     QuasiStaticLinear,
+    /// Finite deformation, updated Lagrangian, Newton-Raphson per load step
+    /// (G section 2, AMPLE); plane strain.
+    QuasiStaticFinite,
 }
 
 /// How condition numbers are computed each step.
@@ -298,9 +309,16 @@ pub struct AnalysisSpec {
     #[serde(default)]
     pub kind: AnalysisKind,
     pub load_steps: usize,
-    /// Largest accepted relative residual `|K du - r| / |r|` of a step.
+    /// Largest accepted relative residual: `|K du - r| / |r|` of the linear
+    /// solve, or for Newton `|f_ext - f_int - f_G| / (|f_ext| + |reactions|)`.
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
+    /// Newton iterations per load step at most (finite deformation).
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: usize,
+    /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.
+    #[serde(default)]
+    pub gamma_k: f64,
     #[serde(default)]
     pub condition: ConditionMode,
     /// Largest system solved with dense eigenvalues in `auto` mode.
@@ -312,6 +330,10 @@ fn default_tolerance() -> f64 {
     1e-8
 }
 
+fn default_max_iterations() -> usize {
+    10
+}
+
 fn default_dense_limit() -> usize {
     1500
 }
@@ -320,6 +342,9 @@ fn default_dense_limit() -> usize {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(tag = "name", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ExactSpec {
+    /// Column under self-weight, finite deformation (G (30)): Cauchy
+    /// `s_yy = -rho0 g (top - Y)` at the original height `Y`.
+    ColumnFinite { base: f64, top: f64 },
     /// Column under self-weight between rollers: `s_yy = -rho g (top - Y)`,
     /// with `base` the supported bottom (m). Uses the body's material and the
     /// scene's gravity.
