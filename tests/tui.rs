@@ -91,3 +91,35 @@ fn boundaries_are_drawn_and_reported() {
     let all = screen(&app).join("\n");
     assert!(all.contains("top: L 1.0000 m, 2 cells"), "{all}");
 }
+
+#[test]
+fn gamma_k_is_tuned_from_the_keyboard() {
+    let mut sim = sim_with("elastic-beam-ghost", |_| {});
+    let mut app = App::new(&sim, None);
+    assert!(screen(&app).join("\n").contains("gamma_K 1.200e7 Pa (1.0e0 E)"));
+    match app.apply(Action::LowerGammaK) {
+        Some(Command::SetGammaK(g)) => assert!((g - 1.2e6).abs() < 1e-6),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(app.apply(Action::ToggleGhost), Some(Command::SetGammaK(0.0)));
+    // The engine answers with its parameters; then ghost can come back.
+    let mut p = sim.params().clone();
+    p.gamma_k = 0.0;
+    app.update(Update::Params(p.clone()));
+    assert!(screen(&app).join("\n").contains("ghost off"));
+    // Back on at the last value it had (the lowered one).
+    match app.apply(Action::ToggleGhost) {
+        Some(Command::SetGammaK(g)) => assert!((g - 1.2e6).abs() < 1e-6),
+        other => panic!("{other:?}"),
+    }
+    // A step with ghost shows its residual history in the chart.
+    app.apply(Action::Step);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    let all = screen(&app).join("\n");
+    assert!(
+        all.contains("residual per iteration (log10)") && all.contains("1e-"),
+        "{all}"
+    );
+    assert!(!app.view.ghost_faces.is_empty());
+}

@@ -3,7 +3,7 @@
 
 use crate::field::Field;
 use crate::grid::Grid;
-use crate::simulation::{Simulation, StepFailure, StepReport};
+use crate::simulation::{Params, Simulation, StepFailure, StepReport};
 
 /// What the canvas shows of the simulation at its latest step.
 #[derive(Clone, Debug)]
@@ -17,6 +17,8 @@ pub struct View {
     pub field: Field,
     pub active_cells: Vec<usize>,
     pub boundaries: Vec<BoundaryView>,
+    /// Faces carrying ghost stabilisation in the last step.
+    pub ghost_faces: Vec<([f64; 2], [f64; 2])>,
 }
 
 /// A boundary as drawn: the sampled spline and its Bezier control points.
@@ -65,6 +67,7 @@ impl View {
             field,
             active_cells: sim.active_cells().to_vec(),
             boundaries: BoundaryView::all(sim),
+            ghost_faces: sim.ghost_faces().to_vec(),
         }
     }
 }
@@ -75,16 +78,24 @@ pub enum Action {
     Step,
     ToggleHelp,
     ToggleControlPoints,
+    /// Multiply `gamma_K` by 10 (from 0: start at 1e-6 E).
+    RaiseGammaK,
+    /// Divide `gamma_K` by 10.
+    LowerGammaK,
+    /// Switch ghost stabilisation off, or back on at its last value.
+    ToggleGhost,
     CloseOverlay,
     NextField,
     Quit,
 }
 
 /// What the app wants the engine to do after an action.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command {
     Step,
     SetField(Field),
+    /// New ghost stiffness penalty `gamma_K` (from the next step).
+    SetGammaK(f64),
     Quit,
 }
 
@@ -103,6 +114,12 @@ pub struct App {
     /// Draw the boundaries' Bezier control points.
     pub show_control: bool,
     pub recording: Option<String>,
+    /// The engine's current parameters.
+    pub params: Params,
+    /// `gamma_K` to restore when ghost stabilisation is switched back on.
+    pub last_gamma: f64,
+    /// Young's modulus of the first material (scale for `gamma_K`).
+    pub modulus: f64,
     /// A message for the status line (e.g. recording errors).
     pub status: String,
     pub quit: bool,
@@ -122,6 +139,13 @@ impl App {
             show_help: false,
             show_control: false,
             recording,
+            params: sim.params().clone(),
+            last_gamma: if sim.params().gamma_k > 0.0 {
+                sim.params().gamma_k
+            } else {
+                sim.model().materials[0].e
+            },
+            modulus: sim.model().materials[0].e,
             status: String::new(),
             quit: false,
         }
@@ -158,6 +182,25 @@ impl App {
                 self.show_control = !self.show_control;
                 None
             }
+            Action::RaiseGammaK | Action::LowerGammaK | Action::ToggleGhost => {
+                if self.busy {
+                    self.status = "wait for the step to finish before changing gamma_K".into();
+                    return None;
+                }
+                let g = self.params.gamma_k;
+                let new = match action {
+                    Action::RaiseGammaK if g == 0.0 => 1e-6 * self.modulus,
+                    Action::RaiseGammaK => 10.0 * g,
+                    Action::LowerGammaK => g / 10.0,
+                    _ if g > 0.0 => 0.0,
+                    _ => self.last_gamma,
+                };
+                if new > 0.0 {
+                    self.last_gamma = new;
+                }
+                self.status = format!("gamma_K = {new:.3e} Pa from the next step");
+                Some(Command::SetGammaK(new))
+            }
             Action::CloseOverlay => {
                 self.show_help = false;
                 None
@@ -188,6 +231,7 @@ impl App {
                 self.failure = Some(failure);
             }
             Update::View(view) => self.view = *view,
+            Update::Params(p) => self.params = p,
             Update::Message(m) => self.status = m,
         }
     }
@@ -196,6 +240,8 @@ impl App {
 /// What the engine sends back.
 #[derive(Debug)]
 pub enum Update {
+    /// The engine's parameters after a change.
+    Params(Params),
     Stepped(Box<StepReport>, Box<View>),
     Failed(StepFailure),
     View(Box<View>),

@@ -36,10 +36,18 @@ pub fn draw(frame: &mut Frame, app: &App) {
     );
     let [canvas, side] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
     draw_canvas(frame, app, canvas);
-    let [last, table] = Layout::vertical([Constraint::Length(12), Constraint::Min(3)]).areas(side);
+    let [params, last, chart, table] = Layout::vertical([
+        Constraint::Length(3),
+        Constraint::Length(12),
+        Constraint::Length(9),
+        Constraint::Min(3),
+    ])
+    .areas(side);
+    draw_params(frame, app, params);
     draw_last_step(frame, app, last);
+    draw_residuals(frame, app, chart);
     draw_table(frame, app, table);
-    let keys = "space step · f field · c control pts · ? help · q quit";
+    let keys = "space step · g/G gamma_K · ? help · q quit";
     let rec = app
         .recording
         .as_deref()
@@ -99,6 +107,9 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                 ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
             }
             ctx.layer();
+            for (a, b) in &app.view.ghost_faces {
+                ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], Color::Rgb(240, 140, 20)));
+            }
             for bv in &app.view.boundaries {
                 let color = if bv.loaded { Color::LightRed } else { Color::White };
                 for w in bv.curve.windows(2) {
@@ -130,6 +141,100 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
             }
         });
     frame.render_widget(canvas, area);
+}
+
+fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
+    let p = &app.params;
+    let ghost = if p.gamma_k > 0.0 {
+        format!("gamma_K {:.3e} Pa ({:.1e} E)", p.gamma_k, p.gamma_k / app.modulus)
+    } else {
+        "ghost off".to_string()
+    };
+    frame.render_widget(
+        Paragraph::new(format!(
+            "{ghost}  tol {:.1e}  max it {}  cond {:?}",
+            p.tolerance, p.max_iterations, p.condition
+        ))
+        .block(Block::default().borders(Borders::ALL).title(" parameters ")),
+        area,
+    );
+}
+
+/// Residual per iteration, log10, for the last few steps (newest brightest).
+fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
+    use ratatui::widgets::{Axis, Chart, Dataset, GraphType};
+    let mut series: Vec<Vec<(f64, f64)>> = app
+        .reports
+        .iter()
+        .rev()
+        .take(4)
+        .map(|r| {
+            r.residuals
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| **v > 0.0)
+                .map(|(i, v)| (i as f64, v.log10()))
+                .collect()
+        })
+        .collect();
+    if let Some(f) = &app.failure {
+        series.insert(
+            0,
+            f.residuals()
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| **v > 0.0)
+                .map(|(i, v)| (i as f64, v.log10()))
+                .collect(),
+        );
+    }
+    let (mut ymin, mut ymax, mut xmax) = (-16.0f64, 1.0f64, 1.0f64);
+    for s in &series {
+        for &(x, y) in s {
+            ymin = ymin.min(y.floor());
+            ymax = ymax.max(y.ceil());
+            xmax = xmax.max(x);
+        }
+    }
+    let colors = [
+        Color::White,
+        Color::Gray,
+        Color::DarkGray,
+        Color::DarkGray,
+        Color::DarkGray,
+    ];
+    let datasets: Vec<Dataset> = series
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            Dataset::default()
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(if k == 0 && app.failure.is_some() {
+                    Color::Red
+                } else {
+                    colors[k.min(4)]
+                }))
+                .data(s)
+        })
+        .collect();
+    let chart = Chart::new(datasets)
+        .block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(" residual per iteration (log10) "),
+        )
+        .x_axis(
+            Axis::default()
+                .bounds([0.0, xmax])
+                .labels(["0".to_string(), format!("{xmax}")]),
+        )
+        .y_axis(
+            Axis::default()
+                .bounds([ymin, ymax])
+                .labels([format!("1e{ymin}"), format!("1e{ymax}")]),
+        );
+    frame.render_widget(chart, area);
 }
 
 fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
@@ -239,6 +344,8 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("space   take one load step"),
         Line::raw("f       colour points by the next field"),
         Line::raw("c       show or hide boundary control points"),
+        Line::raw("G / g   gamma_K x10 / /10 (from the next step)"),
+        Line::raw("0       ghost stabilisation off / back on"),
         Line::raw("?       show or hide this help"),
         Line::raw("Esc     close this help"),
         Line::raw("q       quit (the recording is closed cleanly)"),

@@ -24,6 +24,9 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('?') => Some(Action::ToggleHelp),
         KeyCode::Char('f') => Some(Action::NextField),
         KeyCode::Char('c') => Some(Action::ToggleControlPoints),
+        KeyCode::Char('G') => Some(Action::RaiseGammaK),
+        KeyCode::Char('g') => Some(Action::LowerGammaK),
+        KeyCode::Char('0') => Some(Action::ToggleGhost),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -70,6 +73,23 @@ fn engine(
             Command::SetField(f) => {
                 field = f;
                 let _ = updates.send(Update::View(Box::new(View::of(&sim, field))));
+            }
+            Command::SetGammaK(g) => {
+                let params = crate::simulation::Params {
+                    gamma_k: g,
+                    ..sim.params().clone()
+                };
+                sim.set_params(params.clone());
+                if let Some(rec) = recorder.as_mut() {
+                    let r = rec.event(
+                        &format!("parameter: gamma_K = {g:e} Pa from step {}", sim.step_index() + 1),
+                        "INFO",
+                    );
+                    if !warn(&updates, r) {
+                        recorder = None;
+                    }
+                }
+                let _ = updates.send(Update::Params(params));
             }
             Command::Quit => break,
         }
