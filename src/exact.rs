@@ -37,6 +37,9 @@ pub enum ExactSolution {
     ConfinedY {
         stress_yy: f64,
         base: f64,
+        /// Rotation of the block's frame (rad) about `about`.
+        angle: f64,
+        about: P2,
         material: LinearElastic,
     },
     /// Lame's thick cylinder under internal pressure `p`:
@@ -120,8 +123,16 @@ impl ExactSolution {
                 [0.0, m * strain_yy, 0.0]
             }
             ExactSolution::ConfinedY {
-                stress_yy, material, ..
-            } => [lateral_ratio(material) * stress_yy, *stress_yy, 0.0],
+                stress_yy,
+                material,
+                angle,
+                ..
+            } => {
+                // Uniform in the block frame; rotate: s = R s' R^T.
+                let (sx, sy) = (lateral_ratio(material) * stress_yy, *stress_yy);
+                let (s, c) = angle.sin_cos();
+                [c * c * sx + s * s * sy, s * s * sx + c * c * sy, c * s * (sx - sy)]
+            }
             ExactSolution::Lame { p, a, b, center, .. } => {
                 let (dx, dy) = (x[0] - center[0], x[1] - center[1]);
                 let r2 = dx * dx + dy * dy;
@@ -177,8 +188,17 @@ impl ExactSolution {
             ExactSolution::ConfinedY {
                 stress_yy,
                 base,
+                angle,
+                about,
                 material,
-            } => [0.0, stress_yy / constrained_modulus(material) * (x[1] - base)],
+            } => {
+                // Block-frame coordinate y' of x, then u = R (0, e (y' - base)).
+                let (s, c) = angle.sin_cos();
+                let (dx, dy) = (x[0] - about[0], x[1] - about[1]);
+                let yp = about[1] + (-s * dx + c * dy);
+                let u = stress_yy / constrained_modulus(material) * (yp - base);
+                [-s * u, c * u]
+            }
             ExactSolution::Lame {
                 p,
                 a,

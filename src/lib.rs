@@ -27,6 +27,7 @@ pub mod field;
 pub mod geometry;
 pub mod ghost;
 pub mod grid;
+pub mod ibm;
 pub mod linalg;
 pub mod material;
 pub mod model;

@@ -271,6 +271,17 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
         );
     }
     if let Some(r) = &last {
+        for b in &r.ibm {
+            out!(
+                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) N, violation {:.2e} m, {} cells cut",
+                b.name,
+                r.step,
+                b.reaction[0],
+                b.reaction[1],
+                b.violation,
+                b.cut_cells
+            );
+        }
         for b in &r.boundaries {
             out!(
                 "boundary `{}` (start of step {}): length {:.6} m{}, {} cells cut, traction resultant ({:.6e}, {:.6e}) N{}",

@@ -7,6 +7,7 @@ use crate::boundary::{Boundary, Traction};
 use crate::exact::ExactSolution;
 use crate::geometry::{Region, P2};
 use crate::grid::Grid;
+use crate::ibm::IbmBoundary;
 use crate::material::LinearElastic;
 use crate::points::Points;
 use crate::quadrature::gauss_legendre;
@@ -69,6 +70,8 @@ pub struct Model {
     pub point_loads: Vec<PointLoad>,
     /// B-spline boundaries (tracked curves, optionally with tractions).
     pub boundaries: Vec<Boundary>,
+    /// Implicit-boundary Dirichlet conditions.
+    pub ibm: Vec<IbmBoundary>,
     pub analysis: AnalysisSpec,
     pub exact: Option<ExactSolution>,
 }
@@ -355,6 +358,96 @@ impl Model {
             Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
         };
 
+        if !(a.delta_over_h > 0.0 && a.delta_over_h <= 1.0) {
+            return Err(FieldError::new("analysis.delta_over_h", "must lie in (0, 1]"));
+        }
+        let mut ibm = Vec::new();
+        for (k, spec) in scene.ibm.iter().enumerate() {
+            let f = |n: &str| format!("ibm[{k}].{n}");
+            if a.kind != crate::scene::AnalysisKind::QuasiStaticLinear {
+                return Err(FieldError::new(
+                    f("kind"),
+                    "implicit boundaries work with the quasi-static-linear analysis so far",
+                ));
+            }
+            if bodies.iter().any(|b| b.basis != BasisKind::Standard) {
+                return Err(FieldError::new(
+                    f("kind"),
+                    "implicit boundaries need standard-basis bodies so far",
+                ));
+            }
+            if spec.points.len() < 2 || !spec.points.iter().flatten().all(|v| v.is_finite()) {
+                return Err(FieldError::new(
+                    f("points"),
+                    "a polyline needs at least 2 finite points",
+                ));
+            }
+            if spec.points.windows(2).any(|w| w[0] == w[1]) {
+                return Err(FieldError::new(f("points"), "consecutive points coincide"));
+            }
+            if !(1..=20).contains(&spec.gauss_points) {
+                return Err(FieldError::new(f("gauss_points"), "must be between 1 and 20"));
+            }
+            let value = match spec.kind {
+                DirichletKind::Fixed => {
+                    if spec.normal_displacement.is_some() {
+                        return Err(FieldError::new(
+                            f("normal_displacement"),
+                            "only for rollers; use `displacement`",
+                        ));
+                    }
+                    spec.displacement.unwrap_or([0.0; 2])
+                }
+                DirichletKind::Roller => {
+                    if spec.displacement.is_some() {
+                        return Err(FieldError::new(
+                            f("displacement"),
+                            "only for fixed; use `normal_displacement`",
+                        ));
+                    }
+                    [spec.normal_displacement.unwrap_or(0.0), 0.0]
+                }
+            };
+            let mut b = IbmBoundary {
+                name: spec.name.clone(),
+                kind: spec.kind,
+                points: spec.points.clone(),
+                side: 1.0,
+                value,
+                gauss_points: spec.gauss_points,
+            };
+            b.side = match spec.material_side {
+                Some(MaterialSide::Left) => 1.0,
+                Some(MaterialSide::Right) => -1.0,
+                None => {
+                    let (p0, p1) = (spec.points[0], spec.points[1]);
+                    let m = [0.5 * (p0[0] + p1[0]), 0.5 * (p0[1] + p1[1])];
+                    let n = b.normal(p0, p1); // left normal for side = +1
+                    let inside = |x: P2| regions.iter().any(|r| r.contains(x));
+                    let mut side = None;
+                    for eps in [0.01, 0.05, 0.25, 0.5, 1.0] {
+                        let d = eps * grid.h;
+                        match (
+                            inside([m[0] + d * n[0], m[1] + d * n[1]]),
+                            inside([m[0] - d * n[0], m[1] - d * n[1]]),
+                        ) {
+                            (true, false) => side = Some(1.0),
+                            (false, true) => side = Some(-1.0),
+                            _ => continue,
+                        }
+                        break;
+                    }
+                    side.ok_or_else(|| {
+                        FieldError::new(
+                            f("material_side"),
+                            "cannot tell which side the material is on; give material_side",
+                        )
+                    })?
+                }
+            };
+            ibm.push(b);
+        }
+
         let mut boundaries: Vec<Boundary> = Vec::new();
         for (k, spec) in scene.boundaries.iter().enumerate() {
             if boundaries.iter().any(|b| b.name == spec.name) {
@@ -380,6 +473,7 @@ impl Model {
             gravity,
             point_loads,
             boundaries,
+            ibm,
             analysis: a.clone(),
             exact,
         })
@@ -476,9 +570,16 @@ fn build_exact(
                 top,
             })
         }
-        ExactSpec::ConfinedY { stress_yy, base } => Ok(ExactSolution::ConfinedY {
+        ExactSpec::ConfinedY {
             stress_yy,
             base,
+            angle_deg,
+            about,
+        } => Ok(ExactSolution::ConfinedY {
+            stress_yy,
+            base,
+            angle: angle_deg.to_radians(),
+            about,
             material,
         }),
         ExactSpec::Lame {

@@ -374,6 +374,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         condition_unstabilised,
         iterations,
         ghost_faces: faces.len(),
+        ibm: Vec::new(),
         errors,
         max_increment,
         boundaries,

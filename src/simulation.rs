@@ -15,15 +15,18 @@
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
 use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::basis::Stencil;
 use crate::boundary::{self, bspline::BSpline, BoundaryReport};
 use crate::exact::ErrorNorm;
 use crate::geometry::P2;
 use crate::ghost;
+use crate::ibm::{self, IbmReport, IbmStep};
 use crate::linalg::{self, Condition};
 use crate::material::mul3;
 use crate::model::Model;
 use crate::points::Points;
 use crate::scene::ConditionMode;
+use std::collections::BTreeMap;
 use std::fmt;
 use std::time::Instant;
 
@@ -39,6 +42,8 @@ pub struct Params {
     pub max_iterations: usize,
     /// Ghost stiffness penalty `gamma_K` (0: off).
     pub gamma_k: f64,
+    /// Implicit-boundary bandwidth over cell size.
+    pub delta_over_h: f64,
 }
 
 /// Wall-clock time of each phase of a step (s).
@@ -89,6 +94,8 @@ pub struct StepReport {
     pub iterations: usize,
     /// Faces carrying ghost stabilisation this step.
     pub ghost_faces: usize,
+    /// Each implicit boundary: reaction and constraint violation.
+    pub ibm: Vec<IbmReport>,
     /// Errors against the scene's exact solution, if it names one.
     pub errors: Vec<ErrorNorm>,
     /// Largest nodal displacement increment of the step (m).
@@ -193,6 +200,8 @@ pub(crate) struct State {
     pub(crate) ghost_faces: Vec<(P2, P2)>,
     /// Newton iterations over all steps so far.
     pub(crate) iterations: usize,
+    /// Reaction of each implicit boundary at the end of the last step.
+    pub(crate) ibm_reactions: Vec<P2>,
 }
 
 /// A saved state to return to with [`Simulation::restore`].
@@ -214,6 +223,7 @@ impl Simulation {
             dense_limit: model.analysis.dense_limit,
             max_iterations: model.analysis.max_iterations,
             gamma_k: model.analysis.gamma_k,
+            delta_over_h: model.analysis.delta_over_h,
         };
         let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
         let state = State {
@@ -223,6 +233,7 @@ impl Simulation {
             active_cells: map.active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,
+            ibm_reactions: vec![[0.0; 2]; model.ibm.len()],
         };
         Simulation { model, params, state }
     }
@@ -309,31 +320,115 @@ impl Simulation {
             lambda1 - lambda0,
         );
         let d_of = |p: usize| self.model.materials[self.model.bodies[self.state.points.body[p]].material].d_matrix();
+        let grid = &self.model.grid;
+        let pts = &self.state.points;
+        // Implicit boundaries: prescribed increments d^a on the nodes of cut
+        // cells, and the band integrated as extra blocks (C (18)-(27)).
+        let ibm_step = (!self.model.ibm.is_empty()).then(|| {
+            IbmStep::new(
+                &self.model.ibm,
+                grid,
+                &pts.x,
+                self.params.delta_over_h,
+                lambda1 - lambda0,
+            )
+        });
+        let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
+        let mut band: BTreeMap<(u32, u32, u8, u8), BandBlock> = BTreeMap::new();
+        if let Some(s) = &ibm_step {
+            let c = self.model.materials[self.model.bodies[0].material].d_matrix();
+            for b in s.bs {
+                for (x, w) in b.band_points(grid, s.delta) {
+                    let st = ibm::grid_stencil(grid, x);
+                    let (dm, g) = ibm::d_total(s.bs, x, s.delta);
+                    let parts = ibm::b_bar(&st, &dm, &g);
+                    let b1: Vec<_> = parts.iter().map(|p| p.0).collect();
+                    let b2: Vec<_> = parts.iter().map(|p| p.1).collect();
+                    let entry = band
+                        .entry(st.key)
+                        .or_insert_with(|| (st.nodes[..st.len].to_vec(), vec![0.0; 4 * st.len * st.len]));
+                    ibm::add_atcb(&b1, &c, &b2, w, &mut entry.1);
+                    ibm::add_atcb(&b2, &c, &b1, w, &mut entry.1);
+                    ibm::add_atcb(&b2, &c, &b2, w, &mut entry.1);
+                    let bbar: Vec<[[f64; 2]; 3]> = parts
+                        .iter()
+                        .map(|(p1, p2)| [0, 1, 2].map(|r| [p1[r][0] + p2[r][0], p1[r][1] + p2[r][1]]))
+                        .collect();
+                    add_fd(&st, &bbar, &c, &s.da, w, &mut f_d);
+                }
+            }
+            for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+                let st = &map.stencils[p];
+                let (bbar, _) = s.point_b(st, pts.x[p]);
+                add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
+            }
+        }
+        let band: Vec<(Vec<usize>, Vec<f64>)> = band.into_values().collect();
         // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
         let gamma = self.params.gamma_k;
         let faces = if gamma > 0.0 {
-            ghost::faces(&self.model.grid, &map.active_cells)
+            ghost::faces(grid, &map.active_cells)
         } else {
             Vec::new()
         };
         let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+        blocks.extend(band.iter().map(|b| b.0.as_slice()));
         blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-        let ng = map.groups.len();
+        let (ng, nb) = (map.groups.len(), band.len());
         let stiffness = |with_ghost: bool| {
             pattern.assemble_with(&map.dofs, &blocks, |b, out| {
                 if b < ng {
-                    map.group_stiffness(&map.groups[b], &self.state.points, &d_of, out)
+                    let g = &map.groups[b];
+                    match &ibm_step {
+                        Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
+                            let m2 = 2 * g.nodes.len();
+                            out.clear();
+                            out.resize(m2 * m2, 0.0);
+                            for &p in &g.points {
+                                let (bb, _) = s.point_b(&map.stencils[p], pts.x[p]);
+                                ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
+                            }
+                        }
+                        _ => map.group_stiffness(g, pts, &d_of, out),
+                    }
+                } else if b < ng + nb {
+                    out.clear();
+                    out.extend_from_slice(&band[b - ng].1);
                 } else {
-                    faces[b - ng].stiffness(if with_ghost { gamma } else { 0.0 }, out)
+                    faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
                 }
             })
         };
         let (k, coupling) = stiffness(true);
-        let (forces, boundaries) = self.nodal_forces(&map, step, lambda1)?;
+        let (mut forces, boundaries) = self.nodal_forces(&map, step, lambda1)?;
+        if let Some(s) = &ibm_step {
+            // Points inside a band work through B_bar: correct f_int.
+            for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
+                let st = &map.stencils[p];
+                let (bb, plain) = s.point_b(st, pts.x[p]);
+                for (k, (n, _, _)) in st.iter().enumerate() {
+                    for c in 0..2 {
+                        if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                            let sig = pts.stress[p];
+                            forces.int[i] +=
+                                pts.vol[p] * (0..3).map(|r| (bb[k][r][c] - plain[k][r][c]) * sig[r]).sum::<f64>();
+                        }
+                    }
+                }
+            }
+        }
         let rhs: Vec<f64> = (0..map.dofs.n_free)
             .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
             .collect();
+        let mut rhs = rhs;
+        for (n, d) in map.dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = d[c] {
+                    rhs[i] -= f_d[n][c];
+                }
+            }
+        }
         let residual_norm = norm(&rhs);
         timings.assembly = start.elapsed().as_secs_f64();
 
@@ -419,9 +514,48 @@ impl Simulation {
 
         // 5. Update the points.
         let t = Instant::now();
-        let nodal = nodal_increments(&map, &du);
+        let nodal_d = nodal_increments(&map, &du);
+        // Points move with N (d + d^a); those inside a band with D N d + N d^a.
+        let nodal: Vec<P2> = match &ibm_step {
+            Some(s) => nodal_d
+                .iter()
+                .zip(&s.da)
+                .map(|(a, b)| [a[0] + b[0], a[1] + b[1]])
+                .collect(),
+            None => nodal_d.clone(),
+        };
         let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
-        let (points, fint_fixed_new) = self.updated_points(&map, &nodal);
+        let (mut points, fint_fixed_new) = self.updated_points(&map, &nodal);
+        let mut ibm_reports = Vec::new();
+        let mut ibm_work = 0.0;
+        if let Some(s) = &ibm_step {
+            for p in (0..points.len()).filter(|&p| s.in_band[p]) {
+                let st = &map.stencils[p];
+                let (bb, plain) = s.point_b(st, pts.x[p]);
+                let (dm, _) = ibm::d_total(s.bs, pts.x[p], s.delta);
+                let mut de = [0.0; 3];
+                let mut dx = [0.0; 2];
+                for (k, (n, w, _)) in st.iter().enumerate() {
+                    for c in 0..2 {
+                        for r in 0..3 {
+                            de[r] += (bb[k][r][c] - plain[k][r][c]) * nodal_d[n][c];
+                        }
+                        for i in 0..2 {
+                            dx[i] += ((dm[i][c]) - if i == c { 1.0 } else { 0.0 }) * w * nodal_d[n][c];
+                        }
+                    }
+                }
+                let ds = mul3(&d_of(p), de);
+                for r in 0..3 {
+                    points.stress[p][r] += ds[r];
+                    points.strain[p][r] += de[r];
+                }
+                points.x[p] = [points.x[p][0] + dx[0], points.x[p][1] + dx[1]];
+            }
+            let (reports, work) = self.ibm_reports(&map, s, &points, &nodal_d, lambda0, lambda1);
+            ibm_reports = reports;
+            ibm_work = work;
+        }
         if let Some(p) =
             (0..points.len()).find(|&p| !points.stress[p].iter().chain(&points.x[p]).all(|v| v.is_finite()))
         {
@@ -446,6 +580,17 @@ impl Simulation {
         for (c, &(_, _, u)) in map.dofs.constrained.iter().enumerate() {
             work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * u;
         }
+        if let Some(s) = &ibm_step {
+            // Body forces also work on the prescribed field's motion N d^a.
+            for (n, d) in map.dofs.node_dof.iter().enumerate() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = d[c] {
+                        work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * s.da[n][c];
+                    }
+                }
+            }
+            work += ibm_work;
+        }
         let strain_energy: f64 = (0..points.len())
             .map(|p| {
                 let (s, e) = (points.stress[p], points.strain[p]);
@@ -461,6 +606,7 @@ impl Simulation {
         self.state.active_cells = map.active_cells.clone();
         self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
         self.state.iterations += 1;
+        self.state.ibm_reactions = ibm_reports.iter().map(|r| r.reaction).collect();
         let errors = match &self.model.exact {
             Some(e) => e.errors(&self.state.points, lambda1),
             None => Vec::new(),
@@ -485,10 +631,97 @@ impl Simulation {
             condition_unstabilised,
             iterations: 1,
             ghost_faces: faces.len(),
+            ibm: ibm_reports,
             errors,
             max_increment,
             boundaries,
         })
+    }
+
+    /// Reports of the implicit boundaries after an update (reaction from
+    /// the out-of-balance of the new stresses on the nodes of each
+    /// boundary's cut cells; violation sampled along the boundary), and the
+    /// work their reactions did in the step (trapezoidal).
+    fn ibm_reports(
+        &self,
+        map: &Mapping,
+        s: &IbmStep,
+        new: &Points,
+        nodal_d: &[P2],
+        lambda0: f64,
+        lambda1: f64,
+    ) -> (Vec<IbmReport>, f64) {
+        let grid = &self.model.grid;
+        let old = &self.state.points;
+        let mut residual = vec![[0.0; 2]; grid.num_nodes()];
+        let g = self.model.gravity;
+        for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
+            let st = &map.stencils[p];
+            let (bb, _) = s.point_b(st, old.x[p]);
+            let sig = new.stress[p];
+            for (k, (n, w, _)) in st.iter().enumerate() {
+                for c in 0..2 {
+                    let fi: f64 = (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
+                    residual[n][c] += fi - lambda1 * w * old.mass[p] * g[c];
+                }
+            }
+        }
+        let mut reports = Vec::new();
+        let mut work = 0.0;
+        let dl = lambda1 - lambda0;
+        for (bi, b) in s.bs.iter().enumerate() {
+            let cells = b.cut_cells(grid);
+            let mut nodes: Vec<usize> = cells
+                .iter()
+                .flat_map(|&c| grid.cell_nodes(c % grid.nx, c / grid.nx))
+                .collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            // The support force on the body balances the out-of-balance
+            // force of the material there: R = f_int - f_ext.
+            let reaction = nodes
+                .iter()
+                .fold([0.0; 2], |a, &n| [a[0] + residual[n][0], a[1] + residual[n][1]]);
+            // Violation: the increment on the boundary (phi = 0) against the prescribed one.
+            let mut violation = 0.0f64;
+            for (a, e, _) in b.pieces(grid) {
+                let n = b.normal(a, e);
+                for t in [0.0, 0.5, 1.0] {
+                    let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
+                    let st = ibm::grid_stencil(grid, [x[0] + 1e-12 * grid.h * n[0], x[1] + 1e-12 * grid.h * n[1]]);
+                    let (dm, _) = ibm::d_total(s.bs, x, s.delta);
+                    let nd = st.interpolate(|k| nodal_d[k]);
+                    let na = st.interpolate(|k| s.da[k]);
+                    let u = [
+                        dm[0][0] * nd[0] + dm[0][1] * nd[1] + na[0],
+                        dm[1][0] * nd[0] + dm[1][1] * nd[1] + na[1],
+                    ];
+                    let v = match b.kind {
+                        crate::scene::DirichletKind::Fixed => (u[0] - b.value[0] * dl).hypot(u[1] - b.value[1] * dl),
+                        crate::scene::DirichletKind::Roller => (u[0] * n[0] + u[1] * n[1] - b.value[0] * dl).abs(),
+                    };
+                    violation = violation.max(v);
+                }
+            }
+            // Work of the reaction on the prescribed motion (trapezoidal).
+            let r0 = self.state.ibm_reactions.get(bi).copied().unwrap_or([0.0; 2]);
+            let du = match b.kind {
+                crate::scene::DirichletKind::Fixed => [b.value[0] * dl, b.value[1] * dl],
+                crate::scene::DirichletKind::Roller => {
+                    let (a, e) = (b.points[0], b.points[1]);
+                    let n = b.normal(a, e);
+                    [b.value[0] * dl * n[0], b.value[0] * dl * n[1]]
+                }
+            };
+            work += 0.5 * ((r0[0] + reaction[0]) * du[0] + (r0[1] + reaction[1]) * du[1]);
+            reports.push(IbmReport {
+                name: b.name.clone(),
+                cut_cells: cells.len(),
+                reaction,
+                violation,
+            });
+        }
+        (reports, work)
     }
 
     /// The splines of all boundaries through the points' current positions.
@@ -633,6 +866,25 @@ fn nodal_increments(map: &Mapping, du: &[f64]) -> Vec<P2> {
             u
         })
         .collect()
+}
+
+/// A band block: its nodes and dense local matrix.
+type BandBlock = (Vec<usize>, Vec<f64>);
+
+/// Add `w B_bar^T C (B d^a)` to the nodal force `f` (the strain of the
+/// prescribed field moved to the right-hand side).
+fn add_fd(st: &Stencil, bbar: &[[[f64; 2]; 3]], c: &[[f64; 3]; 3], da: &[P2], w: f64, f: &mut [P2]) {
+    let g = st.gradient(|n| da[n]);
+    let eps = [g[0][0], g[1][1], g[0][1] + g[1][0]];
+    if eps == [0.0; 3] {
+        return;
+    }
+    let sig = mul3(c, eps);
+    for (k, (n, _, _)) in st.iter().enumerate() {
+        for comp in 0..2 {
+            f[n][comp] += w * (0..3).map(|r| bbar[k][r][comp] * sig[r]).sum::<f64>();
+        }
+    }
 }
 
 /// `K du - rhs`.

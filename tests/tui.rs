@@ -123,3 +123,25 @@ fn gamma_k_is_tuned_from_the_keyboard() {
     );
     assert!(!app.view.ghost_faces.is_empty());
 }
+
+#[test]
+fn delta_is_tuned_and_implicit_boundaries_are_drawn() {
+    let sim = sim_with("block-roller-30", |_| {});
+    let mut app = App::new(&sim, None);
+    assert_eq!(app.view.ibm.len(), 4);
+    assert!(screen(&app).join("\n").contains("delta/h 1e-6"));
+    match app.apply(Action::LowerDelta) {
+        Some(Command::SetDeltaOverH(d)) => assert!((d - 1e-7).abs() < 1e-20),
+        other => panic!("{other:?}"),
+    }
+    let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+    t.draw(|f| draw(f, &app)).unwrap();
+    let cyan = t
+        .backend()
+        .buffer()
+        .content
+        .iter()
+        .filter(|c| c.fg == ratatui::style::Color::Cyan)
+        .count();
+    assert!(cyan > 20, "implicit boundaries drawn in cyan: {cyan}");
+}

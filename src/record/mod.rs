@@ -9,6 +9,8 @@
 //! | `grid` | LineStrips2D | static |
 //! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume | every step |
+//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
+//! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,cut_cells}` | Scalars | every step |
 //! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | every step |
 //! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
 //! | `metrics/newton/iterations`, `metrics/ghost/faces`, `metrics/energy/plastic_dissipation` | Scalars | every step |
@@ -182,6 +184,13 @@ impl Recorder {
             "grid/ghost_faces",
             &rerun::LineStrips2D::new(ghost).with_colors([rerun::Color::from_rgb(240, 140, 20)]),
         ))?;
+        for b in &sim.model().ibm {
+            let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
+            self.check(self.rec.log(
+                format!("ibm/{}/line", b.name),
+                &rerun::LineStrips2D::new([line]).with_colors([rerun::Color::from_rgb(40, 200, 220)]),
+            ))?;
+        }
         for ((name, spline), b) in sim.boundary_splines().into_iter().zip(&sim.model().boundaries) {
             let Some(s) = spline else { continue };
             let color = if b.traction.is_some() {
@@ -245,6 +254,13 @@ impl Recorder {
             self.scalar(&format!("metrics/time/{name}"), v)?;
         }
         self.scalar("metrics/unknowns", report.unknowns as f64)?;
+        for b in &report.ibm {
+            let base = format!("metrics/ibm/{}", b.name);
+            self.scalar(&format!("{base}/reaction_x"), b.reaction[0])?;
+            self.scalar(&format!("{base}/reaction_y"), b.reaction[1])?;
+            self.scalar(&format!("{base}/violation"), b.violation)?;
+            self.scalar(&format!("{base}/cut_cells"), b.cut_cells as f64)?;
+        }
         for b in &report.boundaries {
             let base = format!("metrics/boundary/{}", b.name);
             self.scalar(&format!("{base}/length"), b.length)?;

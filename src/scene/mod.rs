@@ -32,6 +32,8 @@ pub struct Scene {
     pub dirichlet: Vec<DirichletSpec>,
     #[serde(default, rename = "boundary")]
     pub boundaries: Vec<BoundarySpec>,
+    #[serde(default, rename = "ibm")]
+    pub ibm: Vec<IbmSpec>,
     #[serde(default)]
     pub loads: LoadsSpec,
     pub analysis: AnalysisSpec,
@@ -147,6 +149,34 @@ pub struct BodySpec {
     /// Polar placement only: points along the circumference.
     #[serde(default)]
     pub circumferential_points: Option<usize>,
+}
+
+/// `[[ibm]]`: a Dirichlet condition on a straight line or polyline at any
+/// inclination, imposed by the implicit boundary method (C section 3). The
+/// material lies on one side (found from the bodies' regions, or given).
+/// Values are totals at load factor 1, applied in proportion.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IbmSpec {
+    pub name: String,
+    pub kind: DirichletKind,
+    /// Polyline vertices (at least 2), in order.
+    pub points: Vec<[f64; 2]>,
+    /// For `fixed`: the prescribed displacement (m); zero when omitted.
+    #[serde(default)]
+    pub displacement: Option<[f64; 2]>,
+    /// For `roller`: the prescribed displacement along the inward normal (m).
+    #[serde(default)]
+    pub normal_displacement: Option<f64>,
+    #[serde(default)]
+    pub material_side: Option<MaterialSide>,
+    /// Gauss points along each piece of the band (across it: 3).
+    #[serde(default = "default_ibm_gauss")]
+    pub gauss_points: usize,
+}
+
+fn default_ibm_gauss() -> usize {
+    2
 }
 
 /// Which layer of a body's points a boundary passes through.
@@ -319,6 +349,9 @@ pub struct AnalysisSpec {
     /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.
     #[serde(default)]
     pub gamma_k: f64,
+    /// Implicit-boundary bandwidth as a fraction of the cell size (C: 1e-6).
+    #[serde(default = "default_delta_over_h")]
+    pub delta_over_h: f64,
     #[serde(default)]
     pub condition: ConditionMode,
     /// Largest system solved with dense eigenvalues in `auto` mode.
@@ -328,6 +361,10 @@ pub struct AnalysisSpec {
 
 fn default_tolerance() -> f64 {
     1e-8
+}
+
+fn default_delta_over_h() -> f64 {
+    1e-6
 }
 
 fn default_max_iterations() -> usize {
@@ -354,7 +391,17 @@ pub enum ExactSpec {
     UniaxialY { strain_yy: f64, anchor: [f64; 2] },
     /// Uniform vertical stress `stress_yy` (Pa) with lateral confinement
     /// (`u_x = 0`), `u_y = 0` on `y = base`.
-    ConfinedY { stress_yy: f64, base: f64 },
+    ConfinedY {
+        stress_yy: f64,
+        base: f64,
+        /// The block's frame is rotated by this angle about `about`: the
+        /// stress is uniform in that frame and `base` a line `y' = base`
+        /// there (unrotated coordinates).
+        #[serde(default)]
+        angle_deg: f64,
+        #[serde(default)]
+        about: [f64; 2],
+    },
     /// Thick cylinder (Lame) under internal pressure `pressure` (Pa) between
     /// radii `r_inner` and `r_outer` about `center`.
     Lame {

@@ -19,6 +19,8 @@ pub struct View {
     pub boundaries: Vec<BoundaryView>,
     /// Faces carrying ghost stabilisation in the last step.
     pub ghost_faces: Vec<([f64; 2], [f64; 2])>,
+    /// Implicit Dirichlet boundaries (polylines).
+    pub ibm: Vec<Vec<[f64; 2]>>,
 }
 
 /// A boundary as drawn: the sampled spline and its Bezier control points.
@@ -68,6 +70,7 @@ impl View {
             active_cells: sim.active_cells().to_vec(),
             boundaries: BoundaryView::all(sim),
             ghost_faces: sim.ghost_faces().to_vec(),
+            ibm: sim.model().ibm.iter().map(|b| b.points.clone()).collect(),
         }
     }
 }
@@ -84,6 +87,10 @@ pub enum Action {
     LowerGammaK,
     /// Switch ghost stabilisation off, or back on at its last value.
     ToggleGhost,
+    /// Implicit-boundary bandwidth delta/h times 10.
+    RaiseDelta,
+    /// Implicit-boundary bandwidth delta/h divided by 10.
+    LowerDelta,
     CloseOverlay,
     NextField,
     Quit,
@@ -96,6 +103,8 @@ pub enum Command {
     SetField(Field),
     /// New ghost stiffness penalty `gamma_K` (from the next step).
     SetGammaK(f64),
+    /// New implicit-boundary bandwidth `delta/h` (from the next step).
+    SetDeltaOverH(f64),
     Quit,
 }
 
@@ -200,6 +209,20 @@ impl App {
                 }
                 self.status = format!("gamma_K = {new:.3e} Pa from the next step");
                 Some(Command::SetGammaK(new))
+            }
+            Action::RaiseDelta | Action::LowerDelta => {
+                if self.busy {
+                    self.status = "wait for the step to finish before changing delta".into();
+                    return None;
+                }
+                let d = self.params.delta_over_h;
+                let new = if action == Action::RaiseDelta {
+                    (10.0 * d).min(1.0)
+                } else {
+                    (d / 10.0).max(1e-16)
+                };
+                self.status = format!("delta/h = {new:.1e} from the next step");
+                Some(Command::SetDeltaOverH(new))
             }
             Action::CloseOverlay => {
                 self.show_help = false;

@@ -107,6 +107,11 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                 ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
             }
             ctx.layer();
+            for line in &app.view.ibm {
+                for w in line.windows(2) {
+                    ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], Color::Cyan));
+                }
+            }
             for (a, b) in &app.view.ghost_faces {
                 ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], Color::Rgb(240, 140, 20)));
             }
@@ -152,8 +157,8 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
     };
     frame.render_widget(
         Paragraph::new(format!(
-            "{ghost}  tol {:.1e}  max it {}  cond {:?}",
-            p.tolerance, p.max_iterations, p.condition
+            "{ghost}  delta/h {:.0e}  tol {:.1e}  max it {}  cond {:?}",
+            p.delta_over_h, p.tolerance, p.max_iterations, p.condition
         ))
         .block(Block::default().borders(Borders::ALL).title(" parameters ")),
         area,
@@ -283,6 +288,12 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
                 "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
                 t.assembly, t.factorisation, t.solve, t.condition
             )));
+            for b in &r.ibm {
+                lines.push(Line::raw(format!(
+                    "{} (IBM): R ({:.3e}, {:.3e}) N, violation {:.1e} m, {} cells cut",
+                    b.name, b.reaction[0], b.reaction[1], b.violation, b.cut_cells
+                )));
+            }
             for b in &r.boundaries {
                 lines.push(Line::raw(format!(
                     "{}: L {:.4} m, {} cells, F ({:.3e}, {:.3e}) N{}",
@@ -346,6 +357,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("c       show or hide boundary control points"),
         Line::raw("G / g   gamma_K x10 / /10 (from the next step)"),
         Line::raw("0       ghost stabilisation off / back on"),
+        Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
         Line::raw("?       show or hide this help"),
         Line::raw("Esc     close this help"),
         Line::raw("q       quit (the recording is closed cleanly)"),

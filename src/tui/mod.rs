@@ -27,6 +27,8 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('G') => Some(Action::RaiseGammaK),
         KeyCode::Char('g') => Some(Action::LowerGammaK),
         KeyCode::Char('0') => Some(Action::ToggleGhost),
+        KeyCode::Char('D') => Some(Action::RaiseDelta),
+        KeyCode::Char('d') => Some(Action::LowerDelta),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -83,6 +85,23 @@ fn engine(
                 if let Some(rec) = recorder.as_mut() {
                     let r = rec.event(
                         &format!("parameter: gamma_K = {g:e} Pa from step {}", sim.step_index() + 1),
+                        "INFO",
+                    );
+                    if !warn(&updates, r) {
+                        recorder = None;
+                    }
+                }
+                let _ = updates.send(Update::Params(params));
+            }
+            Command::SetDeltaOverH(d) => {
+                let params = crate::simulation::Params {
+                    delta_over_h: d,
+                    ..sim.params().clone()
+                };
+                sim.set_params(params.clone());
+                if let Some(rec) = recorder.as_mut() {
+                    let r = rec.event(
+                        &format!("parameter: delta/h = {d:e} from step {}", sim.step_index() + 1),
                         "INFO",
                     );
                     if !warn(&updates, r) {
