@@ -239,6 +239,9 @@ impl ExactSolution {
     /// - `stress_l2`: `sqrt(sum_p V_p |s_p - s(X_p)|^2 / sum_p V_p |s(X_p)|^2)`
     ///   (Frobenius norm of the in-plane stress; C (30) in L2 form);
     /// - `displacement_l2`: the same for the displacement vector (C (29));
+    /// - `syy_mean_relative`, `displacement_mean_relative`: B (37)-(40),
+    ///   `sum_p V_p |e_p| / |exact_p| / sum_p V_p` for `s_yy` and `|u|`
+    ///   (points where the exact value is zero are skipped);
     /// - `syy_normalised` (column only): G (31),
     ///   `sum_p |s_yy - s_yy(X_p)| V_p / (rho g (top - base) sum_p V_p)`.
     pub fn errors(&self, pts: &Points, load_factor: f64) -> Vec<ErrorNorm> {
@@ -272,6 +275,22 @@ impl ExactSolution {
             g31 += v * (s[1] - se[1]).abs();
             vol += v;
         }
+        // B (37)-(40): volume-weighted means of per-point relative errors.
+        let (mut bs, mut bu, mut bv) = (0.0, 0.0, 0.0);
+        for p in (0..pts.len()).filter(|&p| pts.vol0[p] > 0.0) {
+            let se = self.stress(pts.x0[p])[1] * load_factor;
+            let ue = self.displacement(pts.x0[p]).map(|u| u * load_factor);
+            let u = pts.displacement(p);
+            let v = pts.vol0[p];
+            if se != 0.0 {
+                bs += v * ((pts.stress[p][1] - se) / se).abs();
+            }
+            let un = ue[0].hypot(ue[1]);
+            if un > 0.0 {
+                bu += v * (u[0] - ue[0]).hypot(u[1] - ue[1]) / un;
+            }
+            bv += v;
+        }
         let rel = |d: f64, n: f64| if n > 0.0 { (d / n).sqrt() } else { d.sqrt() };
         let mut out = vec![
             ErrorNorm {
@@ -283,6 +302,14 @@ impl ExactSolution {
                 value: rel(du, nu),
             },
         ];
+        out.push(ErrorNorm {
+            name: "syy_mean_relative",
+            value: bs / bv,
+        });
+        out.push(ErrorNorm {
+            name: "displacement_mean_relative",
+            value: bu / bv,
+        });
         if let ExactSolution::ColumnSelfWeight { rho_g, base, top, .. } = self {
             out.push(ErrorNorm {
                 name: "syy_normalised",

@@ -186,3 +186,28 @@ fn deep_beam_matches_c_tables_2_and_3() {
         assert!((e - paper).abs() < 0.01 * paper, "h {h}: {e} vs {paper}");
     }
 }
+
+#[test]
+fn square_traction_ibm_matches_b_table_1_displacements() {
+    // B 4.1.2 / Table 1: rollers by IBM on three sides, pressure through a
+    // B-spline on the fourth. B: 45 deg Rv 4.84e-7, Rsyy 9.68e-9; 60 deg Rv
+    // 4.90e-7, Rsyy 7.25e-9 (volume-weighted mean relative errors, B (37)-(40)).
+    // B lists no number for 0 deg: the same bound as the others (1.5e-6).
+    for (angle, rv) in [(0u32, 5e-7), (45, 4.84e-7), (60, 4.90e-7)] {
+        let mut sim = sim_with(&format!("square-traction-ibm-{angle}"), |_| {});
+        let r = run_all(&mut sim);
+        let (eu, es) = (error(&r, "displacement_mean_relative"), error(&r, "syy_mean_relative"));
+        println!("{angle} deg: displacement {eu:.3e} (B Table 1 at 45/60 deg: {rv:.2e}), s_yy {es:.3e}");
+        // Displacements at B's order (within a factor 3). Our s_yy errors
+        // are ~1e-7, an order above B's: the O(delta/h) band error (see the
+        // delta sweep) reaches the stresses here; bound them at 1e-6.
+        assert!(eu < 3.0 * rv, "{angle}: {eu}");
+        assert!(es < 1e-6, "{angle}: {es}");
+        // The pressure's resultant is the pressure times the side (B-spline
+        // traction exact on a straight side).
+        let b = &r.boundaries[0];
+        let side = if angle == 0 { 1.0 } else { 100.0 };
+        let p = if angle == 0 { 8000.0 } else { 0.008 };
+        assert!((b.resultant[0].hypot(b.resultant[1]) - p * side).abs() < 1e-9 * p * side);
+    }
+}
