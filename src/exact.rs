@@ -56,6 +56,8 @@ pub enum ExactSolution {
     /// Kirsch: infinite plate, hole of radius `a` at the origin, remote
     /// `s_xx = s` (B (42)-(46)).
     Kirsch { s: f64, a: f64, material: LinearElastic },
+    /// Simple shear `u = (0, g (x - x0))`, `s_xy = mu g`.
+    SimpleShear { g: f64, x0: f64, material: LinearElastic },
 }
 
 /// The constrained modulus `s_yy / e_yy` with `e_xx = 0`.
@@ -98,6 +100,7 @@ impl ExactSolution {
             ExactSolution::ColumnFinite { .. } => "column-finite",
             ExactSolution::Lame { .. } => "lame",
             ExactSolution::Kirsch { .. } => "kirsch",
+            ExactSolution::SimpleShear { .. } => "simple-shear",
         }
     }
 
@@ -146,6 +149,7 @@ impl ExactSolution {
                     (srr - stt) * s * c,
                 ]
             }
+            ExactSolution::SimpleShear { g, material, .. } => [0.0, 0.0, material.e / (2.0 * (1.0 + material.nu)) * g],
             ExactSolution::Kirsch { s, a, .. } => {
                 let r2 = x[0] * x[0] + x[1] * x[1];
                 let th = x[1].atan2(x[0]);
@@ -164,6 +168,7 @@ impl ExactSolution {
     pub fn displacement(&self, x: P2) -> P2 {
         match self {
             ExactSolution::ColumnFinite { .. } => [f64::NAN, f64::NAN],
+            ExactSolution::SimpleShear { g, x0, .. } => [0.0, g * (x[0] - x0)],
             ExactSolution::ColumnSelfWeight {
                 rho_g,
                 base,

@@ -16,6 +16,7 @@
 //! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`.
 
 use crate::basis::{stencil, BasisKind, Stencil};
+use crate::exact::ExactSolution;
 use crate::geometry::P2;
 use crate::grid::Grid;
 use crate::quadrature::gauss_legendre;
@@ -33,6 +34,8 @@ pub struct IbmBoundary {
     /// Fixed: the prescribed displacement; roller: `[u_n, 0]` along the inward normal (totals at load factor 1).
     pub value: P2,
     pub gauss_points: usize,
+    /// Prescribe the exact solution's displacement (least-squares fit).
+    pub exact_field: bool,
 }
 
 /// `d(phi)` and `d'(phi)` for bandwidth `delta`.
@@ -237,6 +240,68 @@ pub fn b_bar(st: &Stencil, d: &M2, g: &[M2; 2]) -> Vec<(Op, Op)> {
         .collect()
 }
 
+/// Global least-squares fit of the exact displacement on the boundaries
+/// with `exact_field` (B (36)); writes the nodal values into `da`.
+fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, da: &mut [P2]) -> Result<(), String> {
+    use std::collections::BTreeMap;
+    let mut index: BTreeMap<usize, usize> = BTreeMap::new();
+    let mut entries: Vec<(Vec<(usize, f64)>, f64, P2)> = Vec::new(); // (node weights, w, u)
+    let (xg, wg) = gauss_legendre(3);
+    for b in bs.iter().filter(|b| b.exact_field) {
+        for (a, e, _) in b.pieces(grid) {
+            let n = b.normal(a, e);
+            let len = (e[0] - a[0]).hypot(e[1] - a[1]);
+            for (xi, wi) in xg.iter().zip(&wg) {
+                let t = 0.5 * (1.0 + xi);
+                let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
+                let st = grid_stencil(grid, [x[0] + 1e-9 * grid.h * n[0], x[1] + 1e-9 * grid.h * n[1]]);
+                let nodes: Vec<(usize, f64)> = st.iter().map(|(k, w, _)| (k, w)).collect();
+                for &(k, _) in &nodes {
+                    let len_before = index.len();
+                    index.entry(k).or_insert(len_before);
+                }
+                entries.push((nodes, 0.5 * len * wi, ex.displacement(x).map(|u| u * dlambda)));
+            }
+        }
+    }
+    let m = index.len();
+    if m == 0 {
+        return Ok(());
+    }
+    let mut mat = faer::Mat::<f64>::zeros(m, m);
+    let mut rhs = faer::Mat::<f64>::zeros(m, 2);
+    for (nodes, w, u) in &entries {
+        for &(k, nk) in nodes {
+            let i = index[&k];
+            for &(l, nl) in nodes {
+                mat[(i, index[&l])] += w * nk * nl;
+            }
+            for c in 0..2 {
+                rhs[(i, c)] += w * nk * u[c];
+            }
+        }
+    }
+    let ev = mat
+        .self_adjoint_eigenvalues(faer::Side::Lower)
+        .map_err(|e| format!("boundary least-squares fit: eigenvalues failed: {e:?}"))?;
+    let (lo, hi) = (ev[0], ev[m - 1]);
+    if !(lo > 1e-13 * hi) {
+        return Err(format!(
+            "the least-squares fit of the prescribed boundary values is singular or ill-conditioned \
+             (eigenvalues {lo:.3e} .. {hi:.3e}): some node of a cut cell barely touches the boundary"
+        ));
+    }
+    let llt = mat
+        .llt(faer::Side::Lower)
+        .map_err(|e| format!("boundary least-squares fit: {e:?}"))?;
+    use faer::linalg::solvers::Solve;
+    llt.solve_in_place(&mut rhs);
+    for (&k, &i) in &index {
+        da[k] = [rhs[(i, 0)], rhs[(i, 1)]];
+    }
+    Ok(())
+}
+
 /// The standard-basis stencil at `x` (band integration uses the grid's
 /// bilinear functions).
 pub fn grid_stencil(grid: &Grid, x: P2) -> Stencil {
@@ -269,10 +334,21 @@ pub struct IbmStep<'a> {
 }
 
 impl<'a> IbmStep<'a> {
-    pub fn new(bs: &'a [IbmBoundary], grid: &Grid, xs: &[P2], delta_over_h: f64, dlambda: f64) -> IbmStep<'a> {
+    /// Prepare a step: `d^a` increments for the load-factor increment
+    /// `dlambda`. Boundaries with `exact_field` get their nodal values from
+    /// the global least-squares fit `(int N^T N dS) d^a = int N^T u dS`
+    /// (B (36)) over all of them at once; an ill-conditioned fit is an error.
+    pub fn new(
+        bs: &'a [IbmBoundary],
+        grid: &Grid,
+        xs: &[P2],
+        delta_over_h: f64,
+        dlambda: f64,
+        exact: Option<&ExactSolution>,
+    ) -> Result<IbmStep<'a>, String> {
         let delta = delta_over_h * grid.h;
         let mut da = vec![[0.0; 2]; grid.num_nodes()];
-        for b in bs {
+        for b in bs.iter().filter(|b| !b.exact_field) {
             for (a, e, cell) in b.pieces(grid) {
                 let (i, j) = (cell % grid.nx, cell / grid.nx);
                 for node in grid.cell_nodes(i, j) {
@@ -290,8 +366,11 @@ impl<'a> IbmStep<'a> {
                 }
             }
         }
+        if let Some(ex) = exact {
+            fit_exact(bs, grid, ex, dlambda, &mut da)?;
+        }
         let in_band = xs.iter().map(|&x| in_band(bs, x, delta)).collect();
-        IbmStep { bs, delta, da, in_band }
+        Ok(IbmStep { bs, delta, da, in_band })
     }
 
     /// Strain operator rows of a point: `B_bar` (for `d`) per stencil node,

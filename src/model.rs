@@ -408,6 +408,17 @@ impl Model {
                     [spec.normal_displacement.unwrap_or(0.0), 0.0]
                 }
             };
+            if spec.exact_field {
+                if spec.kind != DirichletKind::Fixed || spec.displacement.is_some() {
+                    return Err(FieldError::new(
+                        f("exact_field"),
+                        "only for fixed boundaries without `displacement`",
+                    ));
+                }
+                if exact.is_none() {
+                    return Err(FieldError::new(f("exact_field"), "needs an [exact] solution"));
+                }
+            }
             let mut b = IbmBoundary {
                 name: spec.name.clone(),
                 kind: spec.kind,
@@ -415,6 +426,7 @@ impl Model {
                 side: 1.0,
                 value,
                 gauss_points: spec.gauss_points,
+                exact_field: spec.exact_field,
             };
             b.side = match spec.material_side {
                 Some(MaterialSide::Left) => 1.0,
@@ -609,6 +621,7 @@ fn build_exact(
                 material,
             })
         }
+        ExactSpec::SimpleShear { shear, x0 } => Ok(ExactSolution::SimpleShear { g: shear, x0, material }),
         ExactSpec::UniaxialY { strain_yy, anchor } => {
             if !strain_yy.is_finite() || !anchor.iter().all(|a| a.is_finite()) {
                 return Err(FieldError::new("exact", "parameters must be finite"));

@@ -200,8 +200,6 @@ pub(crate) struct State {
     pub(crate) ghost_faces: Vec<(P2, P2)>,
     /// Newton iterations over all steps so far.
     pub(crate) iterations: usize,
-    /// Reaction of each implicit boundary at the end of the last step.
-    pub(crate) ibm_reactions: Vec<P2>,
 }
 
 /// A saved state to return to with [`Simulation::restore`].
@@ -233,7 +231,6 @@ impl Simulation {
             active_cells: map.active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,
-            ibm_reactions: vec![[0.0; 2]; model.ibm.len()],
         };
         Simulation { model, params, state }
     }
@@ -324,15 +321,21 @@ impl Simulation {
         let pts = &self.state.points;
         // Implicit boundaries: prescribed increments d^a on the nodes of cut
         // cells, and the band integrated as extra blocks (C (18)-(27)).
-        let ibm_step = (!self.model.ibm.is_empty()).then(|| {
-            IbmStep::new(
-                &self.model.ibm,
-                grid,
-                &pts.x,
-                self.params.delta_over_h,
-                lambda1 - lambda0,
+        let ibm_step = if self.model.ibm.is_empty() {
+            None
+        } else {
+            Some(
+                IbmStep::new(
+                    &self.model.ibm,
+                    grid,
+                    &pts.x,
+                    self.params.delta_over_h,
+                    lambda1 - lambda0,
+                    self.model.exact.as_ref(),
+                )
+                .map_err(|reason| StepFailure::Singular { step, reason })?,
             )
-        });
+        };
         let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
         let mut band: BTreeMap<(u32, u32, u8, u8), BandBlock> = BTreeMap::new();
         if let Some(s) = &ibm_step {
@@ -606,7 +609,6 @@ impl Simulation {
         self.state.active_cells = map.active_cells.clone();
         self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
         self.state.iterations += 1;
-        self.state.ibm_reactions = ibm_reports.iter().map(|r| r.reaction).collect();
         let errors = match &self.model.exact {
             Some(e) => e.errors(&self.state.points, lambda1),
             None => Vec::new(),
@@ -653,23 +655,35 @@ impl Simulation {
     ) -> (Vec<IbmReport>, f64) {
         let grid = &self.model.grid;
         let old = &self.state.points;
+        // Out-of-balance of the material at the start and end of the step:
+        // where the implicit boundaries act, it is their reaction.
         let mut residual = vec![[0.0; 2]; grid.num_nodes()];
+        let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
         let g = self.model.gravity;
         for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
             let st = &map.stencils[p];
             let (bb, _) = s.point_b(st, old.x[p]);
-            let sig = new.stress[p];
             for (k, (n, w, _)) in st.iter().enumerate() {
                 for c in 0..2 {
-                    let fi: f64 = (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
-                    residual[n][c] += fi - lambda1 * w * old.mass[p] * g[c];
+                    let f = |sig: [f64; 3]| (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
+                    residual[n][c] += f(new.stress[p]) - lambda1 * w * old.mass[p] * g[c];
+                    residual0[n][c] += f(old.stress[p]) - lambda0 * w * old.mass[p] * g[c];
                 }
             }
         }
-        let mut reports = Vec::new();
+        // Work of the reactions: trapezoidal on the nodal increments.
         let mut work = 0.0;
+        for n in 0..grid.num_nodes() {
+            if map.dofs.node_dof[n][0] == Dof::Inactive {
+                continue;
+            }
+            for c in 0..2 {
+                work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + s.da[n][c]);
+            }
+        }
+        let mut reports = Vec::new();
         let dl = lambda1 - lambda0;
-        for (bi, b) in s.bs.iter().enumerate() {
+        for b in s.bs.iter() {
             let cells = b.cut_cells(grid);
             let mut nodes: Vec<usize> = cells
                 .iter()
@@ -696,24 +710,17 @@ impl Simulation {
                         dm[0][0] * nd[0] + dm[0][1] * nd[1] + na[0],
                         dm[1][0] * nd[0] + dm[1][1] * nd[1] + na[1],
                     ];
+                    let target = match (&self.model.exact, b.exact_field) {
+                        (Some(ex), true) => ex.displacement(x).map(|v| v * dl),
+                        _ => [b.value[0] * dl, b.value[1] * dl],
+                    };
                     let v = match b.kind {
-                        crate::scene::DirichletKind::Fixed => (u[0] - b.value[0] * dl).hypot(u[1] - b.value[1] * dl),
+                        crate::scene::DirichletKind::Fixed => (u[0] - target[0]).hypot(u[1] - target[1]),
                         crate::scene::DirichletKind::Roller => (u[0] * n[0] + u[1] * n[1] - b.value[0] * dl).abs(),
                     };
                     violation = violation.max(v);
                 }
             }
-            // Work of the reaction on the prescribed motion (trapezoidal).
-            let r0 = self.state.ibm_reactions.get(bi).copied().unwrap_or([0.0; 2]);
-            let du = match b.kind {
-                crate::scene::DirichletKind::Fixed => [b.value[0] * dl, b.value[1] * dl],
-                crate::scene::DirichletKind::Roller => {
-                    let (a, e) = (b.points[0], b.points[1]);
-                    let n = b.normal(a, e);
-                    [b.value[0] * dl * n[0], b.value[0] * dl * n[1]]
-                }
-            };
-            work += 0.5 * ((r0[0] + reaction[0]) * du[0] + (r0[1] + reaction[1]) * du[1]);
             reports.push(IbmReport {
                 name: b.name.clone(),
                 cut_cells: cells.len(),

@@ -165,6 +165,10 @@ pub struct IbmSpec {
     /// For `fixed`: the prescribed displacement (m); zero when omitted.
     #[serde(default)]
     pub displacement: Option<[f64; 2]>,
+    /// For `fixed`: prescribe the scene's exact displacement field instead,
+    /// with nodal values by the global least-squares fit B (36).
+    #[serde(default)]
+    pub exact_field: bool,
     /// For `roller`: the prescribed displacement along the inward normal (m).
     #[serde(default)]
     pub normal_displacement: Option<f64>,
@@ -413,6 +417,8 @@ pub enum ExactSpec {
     /// Infinite plate with a circular hole of `radius` at the origin under
     /// remote stress `stress` along x (Kirsch; B (42)-(46)).
     Kirsch { stress: f64, radius: f64 },
+    /// Simple shear `u = (0, shear (x - x0))`, `s_xy = mu shear`.
+    SimpleShear { shear: f64, x0: f64 },
 }
 
 impl Scene {
