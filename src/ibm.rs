@@ -245,7 +245,13 @@ pub fn b_bar(st: &Stencil, d: &M2, g: &[M2; 2]) -> Vec<(Op, Op)> {
 fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, da: &mut [P2]) -> Result<(), String> {
     use std::collections::BTreeMap;
     let mut index: BTreeMap<usize, usize> = BTreeMap::new();
-    let mut entries: Vec<(Vec<(usize, f64)>, f64, P2)> = Vec::new(); // (node weights, w, u)
+    // Per Gauss point: the stencil's (node, N) pairs, the weight, the value.
+    struct Sample {
+        nodes: Vec<(usize, f64)>,
+        w: f64,
+        u: P2,
+    }
+    let mut entries: Vec<Sample> = Vec::new();
     let (xg, wg) = gauss_legendre(3);
     for b in bs.iter().filter(|b| b.exact_field) {
         for (a, e, _) in b.pieces(grid) {
@@ -260,7 +266,11 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
                     let len_before = index.len();
                     index.entry(k).or_insert(len_before);
                 }
-                entries.push((nodes, 0.5 * len * wi, ex.displacement(x).map(|u| u * dlambda)));
+                entries.push(Sample {
+                    nodes,
+                    w: 0.5 * len * wi,
+                    u: ex.displacement(x).map(|u| u * dlambda),
+                });
             }
         }
     }
@@ -270,7 +280,7 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
     }
     let mut mat = faer::Mat::<f64>::zeros(m, m);
     let mut rhs = faer::Mat::<f64>::zeros(m, 2);
-    for (nodes, w, u) in &entries {
+    for Sample { nodes, w, u } in &entries {
         for &(k, nk) in nodes {
             let i = index[&k];
             for &(l, nl) in nodes {
