@@ -549,39 +549,17 @@ fn build_exact(
         ));
     }
     match *spec {
-        ExactSpec::ColumnSelfWeight { base, top } => {
-            if !(top > base) {
-                return Err(FieldError::new("exact.top", "must exceed `base`"));
-            }
-            if gravity[0] != 0.0 || !(gravity[1] < 0.0) {
-                return Err(FieldError::new(
-                    "loads.gravity",
-                    "the column solution needs gravity = [0, -g] with g > 0",
-                ));
-            }
-            Ok(ExactSolution::ColumnSelfWeight {
-                rho_g: -material.density * gravity[1],
-                base,
-                top,
-                material,
-            })
-        }
-        ExactSpec::ColumnFinite { base, top } => {
-            if !(top > base) {
-                return Err(FieldError::new("exact.top", "must exceed `base`"));
-            }
-            if gravity[0] != 0.0 || !(gravity[1] < 0.0) {
-                return Err(FieldError::new(
-                    "loads.gravity",
-                    "the column solution needs gravity = [0, -g] with g > 0",
-                ));
-            }
-            Ok(ExactSolution::ColumnFinite {
-                rho_g: -material.density * gravity[1],
-                base,
-                top,
-            })
-        }
+        ExactSpec::ColumnSelfWeight { base, top } => Ok(ExactSolution::ColumnSelfWeight {
+            rho_g: column_weight(base, top, gravity, &material)?,
+            base,
+            top,
+            material,
+        }),
+        ExactSpec::ColumnFinite { base, top } => Ok(ExactSolution::ColumnFinite {
+            rho_g: column_weight(base, top, gravity, &material)?,
+            base,
+            top,
+        }),
         ExactSpec::ConfinedY {
             stress_yy,
             base,
@@ -633,6 +611,20 @@ fn build_exact(
             })
         }
     }
+}
+
+/// The unit weight `rho g` of a column solution, checking its geometry and gravity.
+fn column_weight(base: f64, top: f64, gravity: P2, material: &LinearElastic) -> Result<f64, FieldError> {
+    if !(top > base) {
+        return Err(FieldError::new("exact.top", "must exceed `base`"));
+    }
+    if gravity[0] != 0.0 || !(gravity[1] < 0.0) {
+        return Err(FieldError::new(
+            "loads.gravity",
+            "the column solution needs gravity = [0, -g] with g > 0",
+        ));
+    }
+    Ok(-material.density * gravity[1])
 }
 
 /// Fill `region` with points: per cell, `n x n` sub-cells clipped against the

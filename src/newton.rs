@@ -142,6 +142,22 @@ fn tangent(
         .0
 }
 
+/// The ghost faces of this step (none when `gamma_K = 0`).
+fn ghost_faces(sim: &Simulation, map: &Mapping) -> Vec<GhostFace> {
+    if sim.params.gamma_k > 0.0 {
+        ghost::faces(&sim.model.grid, &map.active_cells)
+    } else {
+        Vec::new()
+    }
+}
+
+/// Assembly blocks: the point groups, then the ghost faces.
+fn blocks_of<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
+    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+    blocks
+}
+
 fn condition_of(k: &SparseColMat<usize, f64>) -> Condition {
     match linalg::lu_symbolic(k).and_then(|s| linalg::lu(&s, k)) {
         Ok(f) => linalg::one_norm_condition(k, &f),
@@ -174,13 +190,8 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let (forces, boundaries) = sim.nodal_forces(&map, step, lambda1)?;
     let fext: Vec<f64> = forces.ext.iter().map(|f| lambda1 * f).collect();
     let gamma = params.gamma_k;
-    let faces = if gamma > 0.0 {
-        ghost::faces(&model.grid, &map.active_cells)
-    } else {
-        Vec::new()
-    };
-    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+    let faces = ghost_faces(sim, &map);
+    let blocks = blocks_of(&map, &faces);
     let pattern = Pattern::new(&map.dofs, &blocks, Storage::Full);
     timings.assembly += start.elapsed().as_secs_f64();
 
@@ -391,13 +402,8 @@ impl Simulation {
         let model = &self.model;
         let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
         let gamma = self.params.gamma_k;
-        let faces = if gamma > 0.0 {
-            ghost::faces(&model.grid, &map.active_cells)
-        } else {
-            Vec::new()
-        };
-        let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-        blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+        let faces = ghost_faces(self, &map);
+        let blocks = blocks_of(&map, &faces);
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Full);
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rand = move || {

@@ -35,6 +35,25 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
     }
 }
 
+/// Apply new parameters (from the next step), log the change as a
+/// recording event and tell the UI.
+fn set_params(
+    sim: &mut Simulation,
+    recorder: &mut Option<Recorder>,
+    updates: &mpsc::Sender<Update>,
+    params: crate::simulation::Params,
+    event: &str,
+) {
+    sim.set_params(params.clone());
+    if let Some(rec) = recorder.as_mut() {
+        if let Err(e) = rec.event(event, "INFO") {
+            let _ = updates.send(Update::Message(format!("recording stopped: {e}")));
+            *recorder = None;
+        }
+    }
+    let _ = updates.send(Update::Params(params));
+}
+
 /// The engine thread: steps the simulation, records, reports back.
 fn engine(
     mut sim: Simulation,
@@ -81,34 +100,16 @@ fn engine(
                     gamma_k: g,
                     ..sim.params().clone()
                 };
-                sim.set_params(params.clone());
-                if let Some(rec) = recorder.as_mut() {
-                    let r = rec.event(
-                        &format!("parameter: gamma_K = {g:e} Pa from step {}", sim.step_index() + 1),
-                        "INFO",
-                    );
-                    if !warn(&updates, r) {
-                        recorder = None;
-                    }
-                }
-                let _ = updates.send(Update::Params(params));
+                let text = format!("parameter: gamma_K = {g:e} Pa from step {}", sim.step_index() + 1);
+                set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
             Command::SetDeltaOverH(d) => {
                 let params = crate::simulation::Params {
                     delta_over_h: d,
                     ..sim.params().clone()
                 };
-                sim.set_params(params.clone());
-                if let Some(rec) = recorder.as_mut() {
-                    let r = rec.event(
-                        &format!("parameter: delta/h = {d:e} from step {}", sim.step_index() + 1),
-                        "INFO",
-                    );
-                    if !warn(&updates, r) {
-                        recorder = None;
-                    }
-                }
-                let _ = updates.send(Update::Params(params));
+                let text = format!("parameter: delta/h = {d:e} from step {}", sim.step_index() + 1);
+                set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
             Command::Quit => break,
         }
