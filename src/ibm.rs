@@ -36,6 +36,18 @@ pub struct IbmBoundary {
     pub gauss_points: usize,
     /// Prescribe the exact solution's displacement (least-squares fit).
     pub exact_field: bool,
+    /// The boundary moves with its prescribed displacement (a rigid footing).
+    pub moves: bool,
+}
+
+impl IbmBoundary {
+    /// The boundary translated by `d`.
+    pub fn translated(&self, d: P2) -> IbmBoundary {
+        IbmBoundary {
+            points: self.points.iter().map(|p| [p[0] + d[0], p[1] + d[1]]).collect(),
+            ..self.clone()
+        }
+    }
 }
 
 /// `d(phi)` and `d'(phi)` for bandwidth `delta`.
@@ -90,26 +102,33 @@ impl IbmBoundary {
     }
 
     /// Signed distance (positive in the material) and the inward normal of
-    /// the nearest segment.
-    pub fn distance(&self, x: P2) -> (f64, P2) {
-        let mut best = (f64::INFINITY, 0.0, [0.0; 2]);
-        for (a, b) in self.segments() {
+    /// the nearest segment; `None` when the nearest point is one of the
+    /// polyline's two ends (the point lies beside the boundary, not across
+    /// it, and is not constrained by it).
+    pub fn distance(&self, x: P2) -> Option<(f64, P2)> {
+        let last = self.points.len() - 2;
+        let mut best = (f64::INFINITY, 0.0, [0.0; 2], true);
+        for (k, (a, b)) in self.segments().enumerate() {
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let t = (((x[0] - a[0]) * dx + (x[1] - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+            let t_raw = ((x[0] - a[0]) * dx + (x[1] - a[1]) * dy) / (dx * dx + dy * dy);
+            let t = t_raw.clamp(0.0, 1.0);
             let c = [a[0] + t * dx, a[1] + t * dy];
             let dist = (x[0] - c[0]).hypot(x[1] - c[1]);
             let n = self.normal(a, b);
             if dist < best.0 {
                 let signed = (x[0] - c[0]) * n[0] + (x[1] - c[1]) * n[1];
-                best = (dist, if signed >= 0.0 { dist } else { -dist }, n);
+                let beyond_end = (k == 0 && t_raw < 0.0) || (k == last && t_raw > 1.0);
+                best = (dist, if signed >= 0.0 { dist } else { -dist }, n, !beyond_end);
             }
         }
-        (best.1, best.2)
+        best.3.then_some((best.1, best.2))
     }
 
     /// `D` of this boundary and its gradient `dD/dx_j` at `x`.
     fn d_matrix(&self, x: P2, delta: f64) -> (M2, [M2; 2]) {
-        let (phi, n) = self.distance(x);
+        let Some((phi, n)) = self.distance(x) else {
+            return (I2, [[[0.0; 2]; 2]; 2]);
+        };
         let (d, dd) = dirichlet_function(phi, delta);
         match self.kind {
             DirichletKind::Fixed => (
@@ -213,7 +232,7 @@ pub fn d_total(bs: &[IbmBoundary], x: P2, delta: f64) -> (M2, [M2; 2]) {
 
 /// Whether `x` is inside the band of (or beyond) any boundary.
 pub fn in_band(bs: &[IbmBoundary], x: P2, delta: f64) -> bool {
-    bs.iter().any(|b| b.distance(x).0 < delta)
+    bs.iter().any(|b| b.distance(x).is_some_and(|(phi, _)| phi < delta))
 }
 
 /// The modified strain operator split as `(B1, B2)` at `x` for a stencil:

@@ -427,7 +427,14 @@ impl Model {
                 value,
                 gauss_points: spec.gauss_points,
                 exact_field: spec.exact_field,
+                moves: spec.moves,
             };
+            if spec.moves && (spec.kind != DirichletKind::Fixed || spec.exact_field) {
+                return Err(FieldError::new(
+                    f("moves"),
+                    "only fixed boundaries with a uniform displacement can move",
+                ));
+            }
             b.side = match spec.material_side {
                 Some(MaterialSide::Left) => 1.0,
                 Some(MaterialSide::Right) => -1.0,

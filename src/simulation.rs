@@ -200,6 +200,8 @@ pub(crate) struct State {
     pub(crate) ghost_faces: Vec<(P2, P2)>,
     /// Newton iterations over all steps so far.
     pub(crate) iterations: usize,
+    /// How far each moving implicit boundary has moved.
+    pub(crate) ibm_offsets: Vec<P2>,
 }
 
 /// A saved state to return to with [`Simulation::restore`].
@@ -231,6 +233,7 @@ impl Simulation {
             active_cells: map.active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,
+            ibm_offsets: vec![[0.0; 2]; model.ibm.len()],
         };
         Simulation { model, params, state }
     }
@@ -264,6 +267,16 @@ impl Simulation {
     /// Cells holding points after the last step.
     pub fn active_cells(&self) -> &[usize] {
         &self.state.active_cells
+    }
+
+    /// The implicit boundaries where they are now (moving ones displaced).
+    pub fn ibm_boundaries(&self) -> Vec<crate::ibm::IbmBoundary> {
+        self.model
+            .ibm
+            .iter()
+            .zip(&self.state.ibm_offsets)
+            .map(|(b, &d)| b.translated(d))
+            .collect()
     }
 
     /// Ghost faces of the last step (empty without ghost stabilisation).
@@ -321,12 +334,13 @@ impl Simulation {
         let pts = &self.state.points;
         // Implicit boundaries: prescribed increments d^a on the nodes of cut
         // cells, and the band integrated as extra blocks (C (18)-(27)).
-        let ibm_step = if self.model.ibm.is_empty() {
+        let ibm_now = self.ibm_boundaries();
+        let ibm_step = if ibm_now.is_empty() {
             None
         } else {
             Some(
                 IbmStep::new(
-                    &self.model.ibm,
+                    &ibm_now,
                     grid,
                     &pts.x,
                     self.params.delta_over_h,
@@ -609,6 +623,12 @@ impl Simulation {
         self.state.active_cells = map.active_cells.clone();
         self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
         self.state.iterations += 1;
+        for (off, b) in self.state.ibm_offsets.iter_mut().zip(&self.model.ibm) {
+            if b.moves {
+                off[0] += b.value[0] * (lambda1 - lambda0);
+                off[1] += b.value[1] * (lambda1 - lambda0);
+            }
+        }
         let errors = match &self.model.exact {
             Some(e) => e.errors(&self.state.points, lambda1),
             None => Vec::new(),

@@ -231,6 +231,7 @@ fn plate_hole_symmetry_rollers_by_ibm() {
                         points: pts.to_vec(),
                         displacement: None,
                         exact_field: false,
+                        moves: false,
                         normal_displacement: None,
                         material_side: None,
                         gauss_points: 2,
@@ -313,4 +314,38 @@ fn simple_shear_is_exact_for_every_offset() {
         // Energy balance with the reactions' work.
         assert!((r.energy.strain - r.energy.external_work).abs() < 1e-8 * r.energy.strain);
     }
+}
+
+#[test]
+fn rigid_footing_is_pushed_in_without_points_crossing_it() {
+    // C 5.5: all 20 steps complete and no point crosses the footing: every
+    // point that started under it stays under it. (Material beside the
+    // footing may bulge up and drift over its edge; that is not a crossing.)
+    // Without ghost the stiffness turns singular at step 18, reported.
+    let mut sim = sim_with("rigid-footing", |_| {});
+    while !sim.finished() {
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        let footing = &sim.ibm_boundaries()[0];
+        let y = footing.points[0][1];
+        let pts = sim.points();
+        for (p, x) in pts.x.iter().enumerate() {
+            if pts.x0[p][0] > 1.2 && pts.x0[p][0] < 1.8 {
+                assert!(
+                    x[1] <= y + 1e-9,
+                    "step {}: point {p} at {x:?} above the footing at y = {y}",
+                    r.step
+                );
+            }
+        }
+    }
+    let y = sim.ibm_boundaries()[0].points[0][1];
+    assert!((y - 2.0).abs() < 1e-12, "the footing ends 1 m down: {y}");
+    let mut plain = sim_with("rigid-footing", |s| s.analysis.gamma_k = 0.0);
+    let failed = loop {
+        match plain.step() {
+            Ok(_) => continue,
+            Err(f) => break f,
+        }
+    };
+    assert!(matches!(failed, mpmlab::StepFailure::Singular { .. }), "{failed:?}");
 }

@@ -184,7 +184,7 @@ impl Recorder {
             "grid/ghost_faces",
             &rerun::LineStrips2D::new(ghost).with_colors([rerun::Color::from_rgb(240, 140, 20)]),
         ))?;
-        for b in &sim.model().ibm {
+        for b in &sim.ibm_boundaries() {
             let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
             self.check(self.rec.log(
                 format!("ibm/{}/line", b.name),

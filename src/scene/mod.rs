@@ -169,6 +169,10 @@ pub struct IbmSpec {
     /// with nodal values by the global least-squares fit B (36).
     #[serde(default)]
     pub exact_field: bool,
+    /// For `fixed` with a uniform `displacement`: the boundary itself moves
+    /// with the prescribed displacement (a rigid footing pushed in).
+    #[serde(default)]
+    pub moves: bool,
     /// For `roller`: the prescribed displacement along the inward normal (m).
     #[serde(default)]
     pub normal_displacement: Option<f64>,

@@ -70,7 +70,7 @@ impl View {
             active_cells: sim.active_cells().to_vec(),
             boundaries: BoundaryView::all(sim),
             ghost_faces: sim.ghost_faces().to_vec(),
-            ibm: sim.model().ibm.iter().map(|b| b.points.clone()).collect(),
+            ibm: sim.ibm_boundaries().into_iter().map(|b| b.points).collect(),
         }
     }
 }
