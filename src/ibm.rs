@@ -36,8 +36,13 @@ pub struct IbmBoundary {
     pub gauss_points: usize,
     /// Prescribe the exact solution's displacement (least-squares fit).
     pub exact_field: bool,
+    /// Tikhonov weight of the fit (0: plain B (36)).
+    pub fit_regularisation: f64,
     /// The boundary moves with its prescribed displacement (a rigid footing).
     pub moves: bool,
+    /// Follows the B-spline boundary with this index, flattened to this
+    /// many chords per spline segment (its `points` are then rebuilt each step).
+    pub spline: Option<(usize, usize)>,
 }
 
 impl IbmBoundary {
@@ -297,6 +302,11 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
     if m == 0 {
         return Ok(());
     }
+    let eps = bs
+        .iter()
+        .filter(|b| b.exact_field)
+        .map(|b| b.fit_regularisation)
+        .fold(0.0, f64::max);
     let mut mat = faer::Mat::<f64>::zeros(m, m);
     let mut rhs = faer::Mat::<f64>::zeros(m, 2);
     for Sample { nodes, w, u } in &entries {
@@ -310,6 +320,17 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
             }
         }
     }
+    if eps > 0.0 {
+        // Tikhonov term towards the exact field at the nodes: decides the
+        // values of nodes the boundary barely touches, negligible elsewhere.
+        let scale = eps * (0..m).map(|i| mat[(i, i)]).sum::<f64>() / m as f64;
+        for (&k, &i) in &index {
+            let u = ex.displacement(grid.node_position(k)).map(|v| v * dlambda);
+            mat[(i, i)] += scale;
+            rhs[(i, 0)] += scale * u[0];
+            rhs[(i, 1)] += scale * u[1];
+        }
+    }
     let ev = mat
         .self_adjoint_eigenvalues(faer::Side::Lower)
         .map_err(|e| format!("boundary least-squares fit: eigenvalues failed: {e:?}"))?;
@@ -317,7 +338,7 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
     if !(lo > 1e-13 * hi) {
         return Err(format!(
             "the least-squares fit of the prescribed boundary values is singular or ill-conditioned \
-             (eigenvalues {lo:.3e} .. {hi:.3e}): some node of a cut cell barely touches the boundary"
+             (eigenvalues {lo:.3e} .. {hi:.3e}): some node of a cut cell barely touches the boundary; set fit_regularisation (e.g. 1e-10)"
         ));
     }
     let llt = mat

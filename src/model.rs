@@ -358,6 +358,18 @@ impl Model {
             Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
         };
 
+        let mut boundaries: Vec<Boundary> = Vec::new();
+        for (k, spec) in scene.boundaries.iter().enumerate() {
+            if boundaries.iter().any(|b| b.name == spec.name) {
+                return Err(FieldError::new(
+                    format!("boundary[{k}].name"),
+                    format!("boundary `{}` is defined twice", spec.name),
+                ));
+            }
+            let b = build_boundary(k, spec, &grid, &bodies, &regions, &ranges, exact.is_some(), &mut points)?;
+            boundaries.push(b);
+        }
+
         if !(a.delta_over_h > 0.0 && a.delta_over_h <= 1.0) {
             return Err(FieldError::new("analysis.delta_over_h", "must lie in (0, 1]"));
         }
@@ -376,13 +388,35 @@ impl Model {
                     "implicit boundaries need standard-basis bodies so far",
                 ));
             }
-            if spec.points.len() < 2 || !spec.points.iter().flatten().all(|v| v.is_finite()) {
+            let (poly, spline) = match (&spec.boundary, spec.points.is_empty()) {
+                (Some(name), true) => {
+                    let idx = boundaries
+                        .iter()
+                        .position(|b| &b.name == name)
+                        .ok_or_else(|| FieldError::new(f("boundary"), format!("no [[boundary]] named `{name}`")))?;
+                    if !(1..=256).contains(&spec.per_segment) {
+                        return Err(FieldError::new(f("per_segment"), "must be between 1 and 256"));
+                    }
+                    let s = boundaries[idx]
+                        .spline(&points)
+                        .map_err(|e| FieldError::new(f("boundary"), e.to_string()))?;
+                    (s.sample(spec.per_segment), Some((idx, spec.per_segment)))
+                }
+                (None, false) => (spec.points.clone(), None),
+                _ => {
+                    return Err(FieldError::new(
+                        format!("ibm[{k}]"),
+                        "give exactly one of `points` or `boundary`",
+                    ))
+                }
+            };
+            if poly.len() < 2 || !poly.iter().flatten().all(|v| v.is_finite()) {
                 return Err(FieldError::new(
                     f("points"),
                     "a polyline needs at least 2 finite points",
                 ));
             }
-            if spec.points.windows(2).any(|w| w[0] == w[1]) {
+            if poly.windows(2).any(|w| w[0] == w[1]) {
                 return Err(FieldError::new(f("points"), "consecutive points coincide"));
             }
             if !(1..=20).contains(&spec.gauss_points) {
@@ -408,6 +442,9 @@ impl Model {
                     [spec.normal_displacement.unwrap_or(0.0), 0.0]
                 }
             };
+            if !(spec.fit_regularisation >= 0.0 && spec.fit_regularisation < 1.0) {
+                return Err(FieldError::new(f("fit_regularisation"), "must lie in [0, 1)"));
+            }
             if spec.exact_field {
                 if spec.kind != DirichletKind::Fixed || spec.displacement.is_some() {
                     return Err(FieldError::new(
@@ -422,12 +459,14 @@ impl Model {
             let mut b = IbmBoundary {
                 name: spec.name.clone(),
                 kind: spec.kind,
-                points: spec.points.clone(),
+                points: poly.clone(),
                 side: 1.0,
                 value,
                 gauss_points: spec.gauss_points,
                 exact_field: spec.exact_field,
+                fit_regularisation: spec.fit_regularisation,
                 moves: spec.moves,
+                spline,
             };
             if spec.moves && (spec.kind != DirichletKind::Fixed || spec.exact_field) {
                 return Err(FieldError::new(
@@ -439,7 +478,8 @@ impl Model {
                 Some(MaterialSide::Left) => 1.0,
                 Some(MaterialSide::Right) => -1.0,
                 None => {
-                    let (p0, p1) = (spec.points[0], spec.points[1]);
+                    let mid = poly.len() / 2 - 1;
+                    let (p0, p1) = (poly[mid], poly[mid + 1]);
                     let m = [0.5 * (p0[0] + p1[0]), 0.5 * (p0[1] + p1[1])];
                     let n = b.normal(p0, p1); // left normal for side = +1
                     let inside = |x: P2| regions.iter().any(|r| r.contains(x));
@@ -465,18 +505,6 @@ impl Model {
                 }
             };
             ibm.push(b);
-        }
-
-        let mut boundaries: Vec<Boundary> = Vec::new();
-        for (k, spec) in scene.boundaries.iter().enumerate() {
-            if boundaries.iter().any(|b| b.name == spec.name) {
-                return Err(FieldError::new(
-                    format!("boundary[{k}].name"),
-                    format!("boundary `{}` is defined twice", spec.name),
-                ));
-            }
-            let b = build_boundary(k, spec, &grid, &bodies, &regions, &ranges, exact.is_some(), &mut points)?;
-            boundaries.push(b);
         }
 
         Ok(Model {

@@ -275,7 +275,17 @@ impl Simulation {
             .ibm
             .iter()
             .zip(&self.state.ibm_offsets)
-            .map(|(b, &d)| b.translated(d))
+            .map(|(b, &d)| match b.spline {
+                // Follow the tracked spline through the points' positions now.
+                Some((idx, chords)) => match self.model.boundaries[idx].spline(&self.state.points) {
+                    Ok(s) => crate::ibm::IbmBoundary {
+                        points: s.sample(chords),
+                        ..b.clone()
+                    },
+                    Err(_) => b.clone(),
+                },
+                None => b.translated(d),
+            })
             .collect()
     }
 

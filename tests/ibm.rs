@@ -231,7 +231,10 @@ fn plate_hole_symmetry_rollers_by_ibm() {
                         points: pts.to_vec(),
                         displacement: None,
                         exact_field: false,
+                        fit_regularisation: 0.0,
                         moves: false,
+                        boundary: None,
+                        per_segment: 16,
                         normal_displacement: None,
                         material_side: None,
                         gauss_points: 2,
@@ -348,4 +351,58 @@ fn rigid_footing_is_pushed_in_without_points_crossing_it() {
         }
     };
     assert!(matches!(failed, mpmlab::StepFailure::Singular { .. }), "{failed:?}");
+}
+
+#[test]
+fn plate_hole_dirichlet_converges() {
+    // B 4.4.2: Kirsch displacement prescribed on the B-spline outer boundary
+    // by IBM with least-squares nodal values. B Fig. 20: the boundary fit
+    // converges at ~2.26; B Fig. 21: domain errors converge with h, of the
+    // size of the Neumann case.
+    let hs = [0.5, 0.25, 0.125, 0.0625, 0.03125];
+    let run = |h: f64, reg: f64| {
+        let mut sim = sim_with("plate-hole-dirichlet", |s| {
+            s.grid.h = h;
+            s.bodies[0].points_per_cell = 8;
+            s.ibm[0].fit_regularisation = reg;
+        });
+        while !sim.finished() {
+            let r = sim.step()?;
+            if sim.finished() {
+                return Ok((r.ibm[0].violation, error(&r, "displacement_l2"), error(&r, "stress_l2")));
+            }
+        }
+        unreachable!()
+    };
+    // The plain fit fails, with a clear report, once nodes barely touch the curve.
+    match run(0.0625, 0.0) {
+        Err(mpmlab::StepFailure::Singular { reason, .. }) => {
+            assert!(
+                reason.contains("least-squares fit") && reason.contains("fit_regularisation"),
+                "{reason}"
+            )
+        }
+        other => panic!("expected a reported ill-conditioned fit, got {other:?}"),
+    }
+    let rows: Vec<(f64, f64, f64)> = hs.iter().map(|&h| run(h, 1e-10).unwrap()).collect();
+    for (h, r) in hs.iter().zip(&rows) {
+        println!(
+            "h = {h}: boundary fit error {:.3e} m, displacement_l2 {:.3e}, stress_l2 {:.3e}",
+            r.0, r.1, r.2
+        );
+    }
+    let slope = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
+        let xs: Vec<f64> = hs.iter().map(|h| h.ln()).collect();
+        let ys: Vec<f64> = rows.iter().map(|r| f(r).ln()).collect();
+        let (mx, my) = (xs.iter().sum::<f64>() / 5.0, ys.iter().sum::<f64>() / 5.0);
+        xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum::<f64>()
+            / xs.iter().map(|x| (x - mx).powi(2)).sum::<f64>()
+    };
+    let (rf, ru, rs) = (slope(&|r| r.0), slope(&|r| r.1), slope(&|r| r.2));
+    println!("rates: boundary fit {rf:.2}, displacement {ru:.2}, stress {rs:.2}");
+    // Fit about 2 (measured 1.84 over this range; B reports 2.26 — the
+    // reason for the difference is not established); the domain like the
+    // Neumann case (displacement ~2, stress ~1; measured 1.62 and 0.94).
+    assert!(rf > 1.6, "fit rate {rf}");
+    assert!(ru > 1.5 && rs > 0.8, "domain rates {ru} {rs}");
 }

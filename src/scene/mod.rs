@@ -160,8 +160,15 @@ pub struct BodySpec {
 pub struct IbmSpec {
     pub name: String,
     pub kind: DirichletKind,
-    /// Polyline vertices (at least 2), in order.
+    /// Polyline vertices (at least 2), in order; or
+    #[serde(default)]
     pub points: Vec<[f64; 2]>,
+    /// the curve of the B-spline `[[boundary]]` of this name (tracked each
+    /// step, flattened to `per_segment` chords per spline segment).
+    #[serde(default)]
+    pub boundary: Option<String>,
+    #[serde(default = "default_ibm_chords")]
+    pub per_segment: usize,
     /// For `fixed`: the prescribed displacement (m); zero when omitted.
     #[serde(default)]
     pub displacement: Option<[f64; 2]>,
@@ -169,6 +176,12 @@ pub struct IbmSpec {
     /// with nodal values by the global least-squares fit B (36).
     #[serde(default)]
     pub exact_field: bool,
+    /// With `exact_field`: Tikhonov weight `eps` pulling each nodal value
+    /// towards the exact field at the node, relative to the mean diagonal of
+    /// the fit (0: the plain least-squares fit B (36), which fails with a
+    /// report when nodes barely touch the boundary).
+    #[serde(default)]
+    pub fit_regularisation: f64,
     /// For `fixed` with a uniform `displacement`: the boundary itself moves
     /// with the prescribed displacement (a rigid footing pushed in).
     #[serde(default)]
@@ -181,6 +194,10 @@ pub struct IbmSpec {
     /// Gauss points along each piece of the band (across it: 3).
     #[serde(default = "default_ibm_gauss")]
     pub gauss_points: usize,
+}
+
+fn default_ibm_chords() -> usize {
+    16
 }
 
 fn default_ibm_gauss() -> usize {
