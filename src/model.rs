@@ -370,6 +370,13 @@ impl Model {
             boundaries.push(b);
         }
 
+        let mut a = a.clone();
+        if let Some(d) = a.delta {
+            if !(d > 0.0 && d <= grid.h) {
+                return Err(FieldError::new("analysis.delta", "must lie in (0, h]"));
+            }
+            a.delta_over_h = d / grid.h;
+        }
         if !(a.delta_over_h > 0.0 && a.delta_over_h <= 1.0) {
             return Err(FieldError::new("analysis.delta_over_h", "must lie in (0, 1]"));
         }
@@ -521,7 +528,7 @@ impl Model {
             point_loads,
             boundaries,
             ibm,
-            analysis: a.clone(),
+            analysis: a,
             exact,
         })
     }

@@ -406,3 +406,16 @@ fn plate_hole_dirichlet_converges() {
     assert!(rf > 1.6, "fit rate {rf}");
     assert!(ru > 1.5 && rs > 0.8, "domain rates {ru} {rs}");
 }
+
+#[test]
+fn absolute_delta_equals_the_relative_one() {
+    let (_, a) = block(30, 1e-6);
+    let mut sim = sim_with("block-roller-30", |s| {
+        s.analysis.delta = Some(1e-5); // h = 10 mm
+        s.analysis.tolerance = 1e-2;
+    });
+    let b = run_all(&mut sim);
+    // delta = 1e-5 / 10 differs from 1e-6 in the last bit at most.
+    let (x, y) = (error(&a, "stress_l2"), error(&b, "stress_l2"));
+    assert!((x - y).abs() < 1e-6 * x, "{x} {y}");
+}

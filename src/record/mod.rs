@@ -10,6 +10,7 @@
 //! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume | every step |
 //! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
+//! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | every step |
 //! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,cut_cells}` | Scalars | every step |
 //! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | every step |
 //! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
@@ -41,6 +42,13 @@ pub enum RecordError {
     Create { path: PathBuf, message: String },
     #[error("recording {path}: {message}")]
     Write { path: PathBuf, message: String },
+}
+
+/// Outline of cell `c` as a closed strip.
+fn cell_box(g: &crate::grid::Grid, c: usize) -> Vec<[f32; 2]> {
+    let m = g.cell_min(c % g.nx, c / g.nx);
+    let (x0, y0, x1, y1) = (m[0] as f32, m[1] as f32, (m[0] + g.h) as f32, (m[1] + g.h) as f32);
+    vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
 }
 
 /// Writes one run to an `.rrd` file.
@@ -162,15 +170,7 @@ impl Recorder {
             &rerun::Points2D::new(positions).with_colors(colors).with_radii(radii),
         ))?;
         let g = &sim.model().grid;
-        let boxes: Vec<Vec<[f32; 2]>> = sim
-            .active_cells()
-            .iter()
-            .map(|&c| {
-                let m = g.cell_min(c % g.nx, c / g.nx);
-                let (x0, y0, x1, y1) = (m[0] as f32, m[1] as f32, (m[0] + g.h) as f32, (m[1] + g.h) as f32);
-                vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
-            })
-            .collect();
+        let boxes: Vec<Vec<[f32; 2]>> = sim.active_cells().iter().map(|&c| cell_box(g, c)).collect();
         self.check(self.rec.log(
             "grid/active",
             &rerun::LineStrips2D::new(boxes).with_colors([rerun::Color::from_rgb(60, 120, 200)]),
@@ -189,6 +189,11 @@ impl Recorder {
             self.check(self.rec.log(
                 format!("ibm/{}/line", b.name),
                 &rerun::LineStrips2D::new([line]).with_colors([rerun::Color::from_rgb(40, 200, 220)]),
+            ))?;
+            let cut: Vec<Vec<[f32; 2]>> = b.cut_cells(g).iter().map(|&c| cell_box(g, c)).collect();
+            self.check(self.rec.log(
+                format!("ibm/{}/cut_cells", b.name),
+                &rerun::LineStrips2D::new(cut).with_colors([rerun::Color::from_rgb(0, 110, 120)]),
             ))?;
         }
         for ((name, spline), b) in sim.boundary_splines().into_iter().zip(&sim.model().boundaries) {

@@ -377,6 +377,9 @@ pub struct AnalysisSpec {
     /// Implicit-boundary bandwidth as a fraction of the cell size (C: 1e-6).
     #[serde(default = "default_delta_over_h")]
     pub delta_over_h: f64,
+    /// Or the bandwidth itself (m); overrides `delta_over_h`.
+    #[serde(default)]
+    pub delta: Option<f64>,
     #[serde(default)]
     pub condition: ConditionMode,
     /// Largest system solved with dense eigenvalues in `auto` mode.

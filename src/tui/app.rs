@@ -21,6 +21,8 @@ pub struct View {
     pub ghost_faces: Vec<([f64; 2], [f64; 2])>,
     /// Implicit Dirichlet boundaries (polylines).
     pub ibm: Vec<Vec<[f64; 2]>>,
+    /// Cells the implicit boundaries cut.
+    pub cut_cells: Vec<usize>,
 }
 
 /// A boundary as drawn: the sampled spline and its Bezier control points.
@@ -71,6 +73,16 @@ impl View {
             boundaries: BoundaryView::all(sim),
             ghost_faces: sim.ghost_faces().to_vec(),
             ibm: sim.ibm_boundaries().into_iter().map(|b| b.points).collect(),
+            cut_cells: {
+                let mut c: Vec<usize> = sim
+                    .ibm_boundaries()
+                    .iter()
+                    .flat_map(|b| b.cut_cells(&sim.model().grid))
+                    .collect();
+                c.sort_unstable();
+                c.dedup();
+                c
+            },
         }
     }
 }
