@@ -420,3 +420,67 @@ fn absolute_delta_equals_the_relative_one() {
     let (x, y) = (error(&a, "stress_l2"), error(&b, "stress_l2"));
     assert!((x - y).abs() < 1e-3 * x, "{x} {y}");
 }
+
+#[test]
+fn funnel_keeps_the_block_inside_its_curved_walls() {
+    // C 5.6: every step completes and no point leaves the funnel. (C also
+    // reports a straight front face; here it bulges by ~25 mm — the centre
+    // runs ahead of the points at the walls — which is not resolved; see
+    // docs/verification.md. A straight channel translates the block rigidly,
+    // so the rollers themselves let the material slide.)
+    let wall = |x: f64| {
+        if x <= 40.0 {
+            20.0
+        } else if x >= 100.0 {
+            14.0
+        } else {
+            20.0 - 3.0 * (1.0 - (std::f64::consts::PI * (x - 40.0) / 60.0).cos())
+        }
+    };
+    let mut sim = sim_with("funnel", |_| {});
+    let mut worst = f64::NEG_INFINITY;
+    while !sim.finished() {
+        sim.step().unwrap_or_else(|f| panic!("{f}"));
+        for x in &sim.points().x {
+            // How far outside the (curved) wall, positive when outside.
+            worst = worst.max(x[1].abs() - wall(x[0]));
+        }
+    }
+    let pts = sim.points();
+    // The front column of points (2x2 per 4 mm cell: x0 = 39 mm).
+    let front: Vec<f64> = (0..pts.len())
+        .filter(|&p| pts.x0[p][0] > 38.5)
+        .map(|p| pts.x[p][0])
+        .collect();
+    assert_eq!(front.len(), 20);
+    let spread =
+        front.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - front.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+    println!("closest approach to the walls {worst:.3e} mm (negative: inside); front face spread {spread:.3e} mm");
+    // Points stay inside: the walls are exact polylines through the curve
+    // at cell spacing, whose chords lie inside by at most h^2 |y''| / 8 ~ 0.01 mm.
+    assert!(worst < 0.02, "{worst}");
+    // The block did go in: its front moved at least 5 mm everywhere.
+    assert!(front.iter().all(|&x| x > 44.0), "{front:?}");
+}
+
+#[test]
+fn straight_channel_rollers_let_the_block_slide() {
+    // The funnel with straight walls: the pusher translates the block
+    // rigidly between frictionless rollers, storing no energy.
+    let mut sim = sim_with("funnel", |s| {
+        s.ibm[1].points = vec![[-8.0, 20.0], [168.0, 20.0]];
+        s.ibm[2].points = vec![[-8.0, -20.0], [168.0, -20.0]];
+    });
+    let r = run_all(&mut sim);
+    // Stored energy of a rigid motion is zero; 1e-6 J per unit thickness
+    // allows strains of ~1e-7 (the O(delta/h) band error over 10 steps).
+    assert!(r.energy.strain < 1e-6, "{}", r.energy.strain);
+    // Every point moved 40 mm along the channel, to 1e-5 mm (4e-7 relative).
+    for (p, x) in sim.points().x.iter().enumerate() {
+        let u = sim.points().displacement(p);
+        assert!(
+            (u[0] - 40.0).abs() < 1e-5 && u[1].abs() < 1e-5,
+            "point {p} at {x:?}: {u:?}"
+        );
+    }
+}
