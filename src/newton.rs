@@ -328,20 +328,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         let ev = r.b_e.symmetric_eigenvalues().map(|l| 0.5 * l.ln());
         strain_energy += pts.vol0[p] * (0.5 * lam * ev.sum().powi(2) + mu * ev.dot(&ev));
     }
-    if let Some(p) = (0..pts.len()).find(|&p| !pts.stress[p].iter().chain(&pts.x[p]).all(|v| v.is_finite())) {
-        return Err(StepFailure::NonFinite {
-            step,
-            what: format!("stress or position at point {p}"),
-            residuals,
-        });
-    }
-    if let Some(p) = (0..pts.len()).find(|&p| sim.model.grid.cell_of(pts.x[p]).is_none()) {
-        return Err(StepFailure::LeftGrid {
-            step,
-            point: p,
-            position: pts.x[p],
-        });
-    }
+    crate::simulation::check_points(&sim.model.grid, &pts, step, &residuals)?;
     let mut work = 0.0;
     for (n, d) in map.dofs.node_dof.iter().enumerate() {
         for c in 0..2 {

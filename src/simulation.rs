@@ -583,22 +583,7 @@ impl Simulation {
             ibm_reports = reports;
             ibm_work = work;
         }
-        if let Some(p) =
-            (0..points.len()).find(|&p| !points.stress[p].iter().chain(&points.x[p]).all(|v| v.is_finite()))
-        {
-            return Err(StepFailure::NonFinite {
-                step,
-                what: format!("stress or position at point {p}"),
-                residuals,
-            });
-        }
-        if let Some(p) = (0..points.len()).find(|&p| self.model.grid.cell_of(points.x[p]).is_none()) {
-            return Err(StepFailure::LeftGrid {
-                step,
-                point: p,
-                position: points.x[p],
-            });
-        }
+        check_points(&self.model.grid, &points, step, &residuals)?;
         // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
         let mut work = 0.0;
         for i in 0..map.dofs.n_free {
@@ -903,6 +888,31 @@ fn nodal_increments(map: &Mapping, du: &[f64]) -> Vec<P2> {
             u
         })
         .collect()
+}
+
+/// A step's updated points must be finite and inside the grid before they
+/// are committed.
+pub(crate) fn check_points(
+    grid: &crate::grid::Grid,
+    pts: &Points,
+    step: usize,
+    residuals: &[f64],
+) -> Result<(), StepFailure> {
+    if let Some(p) = (0..pts.len()).find(|&p| !pts.stress[p].iter().chain(&pts.x[p]).all(|v| v.is_finite())) {
+        return Err(StepFailure::NonFinite {
+            step,
+            what: format!("stress or position at point {p}"),
+            residuals: residuals.to_vec(),
+        });
+    }
+    if let Some(p) = (0..pts.len()).find(|&p| grid.cell_of(pts.x[p]).is_none()) {
+        return Err(StepFailure::LeftGrid {
+            step,
+            point: p,
+            position: pts.x[p],
+        });
+    }
+    Ok(())
 }
 
 /// A band block: its nodes and dense local matrix.
