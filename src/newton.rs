@@ -202,7 +202,8 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     }
     let mut residuals = Vec::new();
     let mut symbolic = None;
-    let mut last_k = None;
+    // The last tangent and its LU factor, reused for the condition number.
+    let mut last = None;
     let mut iterations = 0;
     let it = loop {
         let t = Instant::now();
@@ -277,7 +278,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
                 }
             }
         }
-        last_k = Some(k);
+        last = Some((k, lu));
         iterations += 1;
     };
 
@@ -286,8 +287,10 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let (condition, condition_unstabilised) = if params.condition == ConditionMode::Off || map.dofs.n_free == 0 {
         (None, None)
     } else {
-        let k = last_k.unwrap_or_else(|| tangent(sim, &map, &pattern, &blocks, &faces, &it, gamma));
-        let with = condition_of(&k);
+        let with = match &last {
+            Some((k, lu)) => linalg::one_norm_condition(k, lu),
+            None => condition_of(&tangent(sim, &map, &pattern, &blocks, &faces, &it, gamma)),
+        };
         let without =
             (!faces.is_empty()).then(|| condition_of(&tangent(sim, &map, &pattern, &blocks, &faces, &it, 0.0)));
         (Some(with), without)
@@ -342,12 +345,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let max_increment = du.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
     timings.update = t.elapsed().as_secs_f64();
 
-    sim.state.points = pts;
-    sim.state.step = step;
-    sim.state.external_work += work;
-    sim.state.active_cells = map.active_cells.clone();
-    sim.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&sim.model.grid, f)).collect();
-    sim.state.iterations += iterations;
+    sim.commit(pts, step, work, &map, &faces, iterations);
     let errors = match &sim.model.exact {
         Some(e) => e.errors(&sim.state.points, lambda1),
         None => Vec::new(),

@@ -269,6 +269,24 @@ impl Simulation {
         &self.state.active_cells
     }
 
+    /// Make a completed step the current state.
+    pub(crate) fn commit(
+        &mut self,
+        points: Points,
+        step: usize,
+        work: f64,
+        map: &Mapping,
+        faces: &[ghost::GhostFace],
+        iterations: usize,
+    ) {
+        self.state.points = points;
+        self.state.step = step;
+        self.state.external_work += work;
+        self.state.active_cells = map.active_cells.clone();
+        self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
+        self.state.iterations += iterations;
+    }
+
     /// The implicit boundaries where they are now (moving ones displaced).
     pub fn ibm_boundaries(&self) -> Vec<crate::ibm::IbmBoundary> {
         self.model
@@ -612,12 +630,7 @@ impl Simulation {
         timings.update = t.elapsed().as_secs_f64();
 
         // Commit.
-        self.state.points = points;
-        self.state.step = step;
-        self.state.external_work += work;
-        self.state.active_cells = map.active_cells.clone();
-        self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
-        self.state.iterations += 1;
+        self.commit(points, step, work, &map, &faces, 1);
         for (off, b) in self.state.ibm_offsets.iter_mut().zip(&self.model.ibm) {
             if b.moves {
                 off[0] += b.value[0] * (lambda1 - lambda0);

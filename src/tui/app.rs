@@ -62,6 +62,7 @@ impl BoundaryView {
 
 impl View {
     pub fn of(sim: &Simulation, field: Field) -> View {
+        let ibm = sim.ibm_boundaries();
         View {
             step: sim.step_index(),
             load_steps: sim.load_steps(),
@@ -72,17 +73,13 @@ impl View {
             active_cells: sim.active_cells().to_vec(),
             boundaries: BoundaryView::all(sim),
             ghost_faces: sim.ghost_faces().to_vec(),
-            ibm: sim.ibm_boundaries().into_iter().map(|b| b.points).collect(),
             cut_cells: {
-                let mut c: Vec<usize> = sim
-                    .ibm_boundaries()
-                    .iter()
-                    .flat_map(|b| b.cut_cells(&sim.model().grid))
-                    .collect();
+                let mut c: Vec<usize> = ibm.iter().flat_map(|b| b.cut_cells(&sim.model().grid)).collect();
                 c.sort_unstable();
                 c.dedup();
                 c
             },
+            ibm: ibm.into_iter().map(|b| b.points).collect(),
         }
     }
 }
