@@ -66,6 +66,9 @@ pub struct Mapping {
     /// Cells a point's basis reaches into (standard: the cell holding it;
     /// GIMP: every cell its domain overlaps): the elements of G 4.2.
     pub active_cells: Vec<usize>,
+    /// Per grid cell, the fraction of its area the points fill: their
+    /// volumes (standard) or their GIMP domains' overlap with the cell.
+    pub cell_fill: Vec<f64>,
 }
 
 impl Mapping {
@@ -100,6 +103,8 @@ impl Mapping {
         // (standard), or every cell its GIMP domain overlaps by more than
         // round-off (the cells whose nodes it weights).
         let mut cells = vec![false; grid.num_cells()];
+        let mut cell_fill = vec![0.0; grid.num_cells()];
+        let h2 = grid.h * grid.h;
         for p in 0..pts.len() {
             if pts.vol[p] == 0.0 {
                 continue;
@@ -108,6 +113,7 @@ impl Mapping {
                 BasisKind::Standard => {
                     if let Some((i, j)) = grid.cell_of(pts.x[p]) {
                         cells[j * grid.nx + i] = true;
+                        cell_fill[j * grid.nx + i] += pts.vol[p] / h2;
                     }
                 }
                 BasisKind::Gimp => {
@@ -117,9 +123,14 @@ impl Mapping {
                         let hi = ((s(pts.x[p][d] + pts.lp[p][d]) - 1e-12).ceil().max(1.0) as usize).min(n);
                         lo..hi.max(lo + 1).min(n)
                     };
+                    let (x, l) = (pts.x[p], pts.lp[p]);
                     for j in range(1, grid.ny) {
                         for i in range(0, grid.nx) {
                             cells[j * grid.nx + i] = true;
+                            let c0 = grid.cell_min(i, j);
+                            let overlap =
+                                |d: usize| ((x[d] + l[d]).min(c0[d] + grid.h) - (x[d] - l[d]).max(c0[d])).max(0.0);
+                            cell_fill[j * grid.nx + i] += overlap(0) * overlap(1) / h2;
                         }
                     }
                 }
@@ -174,6 +185,7 @@ impl Mapping {
                 active_nodes,
             },
             active_cells,
+            cell_fill,
         }
     }
 

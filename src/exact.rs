@@ -58,6 +58,25 @@ pub enum ExactSolution {
     Kirsch { s: f64, a: f64, material: LinearElastic },
     /// Simple shear `u = (0, g (x - x0))`, `s_xy = mu g`.
     SimpleShear { g: f64, x0: f64, material: LinearElastic },
+    /// Free motion of stress-free bodies (explicit dynamics, G 5.1): every
+    /// point keeps its initial velocity, `u = t v0(X)`, with
+    /// `v0 = velocity + L (X - centre)` of its body and `t = load factor x
+    /// duration`; the error is the largest `|u_p - t v0(X_p)|` (m).
+    FreeMotion {
+        /// Per body: `(velocity, L, centre)`.
+        fields: Vec<(P2, [[f64; 2]; 2], P2)>,
+        duration: f64,
+    },
+}
+
+/// The initial velocity `velocity + L (x - centre)`.
+pub fn velocity_field(field: &(P2, [[f64; 2]; 2], P2), x: P2) -> P2 {
+    let (v, l, c) = field;
+    let d = [x[0] - c[0], x[1] - c[1]];
+    [
+        v[0] + l[0][0] * d[0] + l[0][1] * d[1],
+        v[1] + l[1][0] * d[0] + l[1][1] * d[1],
+    ]
 }
 
 /// The constrained modulus `s_yy / e_yy` with `e_xx = 0`.
@@ -101,6 +120,7 @@ impl ExactSolution {
             ExactSolution::Lame { .. } => "lame",
             ExactSolution::Kirsch { .. } => "kirsch",
             ExactSolution::SimpleShear { .. } => "simple-shear",
+            ExactSolution::FreeMotion { .. } => "free-motion",
         }
     }
 
@@ -150,6 +170,7 @@ impl ExactSolution {
                 ]
             }
             ExactSolution::SimpleShear { g, material, .. } => [0.0, 0.0, material.e / (2.0 * (1.0 + material.nu)) * g],
+            ExactSolution::FreeMotion { .. } => [0.0; 3],
             ExactSolution::Kirsch { s, a, .. } => {
                 let r2 = x[0] * x[0] + x[1] * x[1];
                 let th = x[1].atan2(x[0]);
@@ -169,6 +190,8 @@ impl ExactSolution {
         match self {
             ExactSolution::ColumnFinite { .. } => [f64::NAN, f64::NAN],
             ExactSolution::SimpleShear { g, x0, .. } => [0.0, g * (x[0] - x0)],
+            // The first body's field at load factor 1 (errors use each point's own body).
+            ExactSolution::FreeMotion { fields, duration } => velocity_field(&fields[0], x).map(|v| v * duration),
             ExactSolution::ColumnSelfWeight {
                 rho_g,
                 base,
@@ -250,6 +273,21 @@ impl ExactSolution {
     /// - `syy_normalised` (column only): G (31),
     ///   `sum_p |s_yy - s_yy(X_p)| V_p / (rho g (top - base) sum_p V_p)`.
     pub fn errors(&self, pts: &Points, load_factor: f64) -> Vec<ErrorNorm> {
+        if let ExactSolution::FreeMotion { fields, duration } = self {
+            // G 5.1.2: the largest point displacement error |u_p - t v_p0|.
+            let t = load_factor * duration;
+            let worst = (0..pts.len())
+                .map(|p| {
+                    let v = velocity_field(&fields[pts.body[p]], pts.x0[p]);
+                    let u = pts.displacement(p);
+                    (u[0] - t * v[0]).hypot(u[1] - t * v[1])
+                })
+                .fold(0.0, f64::max);
+            return vec![ErrorNorm {
+                name: "displacement_max",
+                value: worst,
+            }];
+        }
         if let ExactSolution::ColumnFinite { rho_g, base, top } = self {
             // G (31): sum_p |s_yy - s_yy(Y_p)| V0_p / (rho0 g l0 V0).
             let (mut e, mut v) = (0.0, 0.0);

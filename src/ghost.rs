@@ -4,7 +4,7 @@
 //!
 //! Face set (G 4.2), rebuilt every step: *active* cells hold material
 //! points; *boundary* cells are active cells sharing a face with an inactive
-//! cell of the grid; Gamma is every face between a boundary cell and
+//! cell, or partly filled cells on the grid's edge; Gamma is every face between a boundary cell and
 //! another active cell. For a face with unit normal `n` (out of the
 //! positive cell `K+`) and the six nodes of its two cells,
 //! `a_k = dN_k^+/dn - dN_k^-/dn` (the grid's bilinear functions, also under
@@ -47,8 +47,18 @@ pub fn face_segment(grid: &Grid, f: &GhostFace) -> ([f64; 2], [f64; 2]) {
     }
 }
 
-/// The ghost faces for the active cells `active` (cell indices).
-pub fn faces(grid: &Grid, active: &[usize]) -> Vec<GhostFace> {
+/// The ghost faces of a mapping's active cells.
+pub fn faces_of(grid: &Grid, map: &crate::assembly::Mapping) -> Vec<GhostFace> {
+    faces(grid, &map.active_cells, &map.cell_fill)
+}
+
+/// Fill fraction below which a cell on the grid's edge counts as cut by the
+/// material's boundary.
+const PARTLY_FILLED: f64 = 0.9;
+
+/// The ghost faces for the active cells `active` (cell indices); `fill`
+/// is each grid cell's filled fraction (see [`crate::assembly::Mapping::cell_fill`]).
+pub fn faces(grid: &Grid, active: &[usize], fill: &[f64]) -> Vec<GhostFace> {
     let mut is_active = vec![false; grid.num_cells()];
     for &c in active {
         is_active[c] = true;
@@ -70,8 +80,16 @@ pub fn faces(grid: &Grid, active: &[usize]) -> Vec<GhostFace> {
         }
         n
     };
+    // A cell on the grid's edge whose other neighbours are all active is
+    // still cut by the material's boundary when it is partly filled (a body
+    // leaving a corner of the grid): without it, the nodes there that points
+    // barely touch would be held by no face. A full cell on the edge (a body
+    // supported on the grid's boundary) is not.
     let boundary: Vec<bool> = (0..grid.num_cells())
-        .map(|c| is_active[c] && neighbours(c).iter().any(|&n| !is_active[n]))
+        .map(|c| {
+            let n = neighbours(c);
+            is_active[c] && (n.iter().any(|&n| !is_active[n]) || (n.len() < 4 && fill[c] < PARTLY_FILLED))
+        })
         .collect();
     let mut out = Vec::new();
     for &c in active {

@@ -22,6 +22,7 @@ pub mod assembly;
 pub mod basis;
 pub mod boundary;
 pub mod colormap;
+pub mod dynamics;
 pub mod exact;
 pub mod field;
 pub mod geometry;

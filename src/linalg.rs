@@ -47,8 +47,18 @@ impl std::fmt::Display for FactorError {
 
 /// Sparse Cholesky factorisation of a symmetric matrix given by its lower triangle.
 pub fn cholesky(a: &SparseColMat<usize, f64>) -> Result<Factor, FactorError> {
-    let symbolic = SymbolicLlt::try_new(a.symbolic(), Side::Lower).map_err(|e| FactorError::Other(format!("{e:?}")))?;
-    Llt::try_new_with_symbolic(symbolic, a.as_ref(), Side::Lower).map_err(|e| match e {
+    cholesky_with(&cholesky_symbolic(a)?, a)
+}
+
+/// Symbolic Cholesky analysis (ordering, elimination tree) of a pattern, to
+/// reuse for every matrix of that pattern.
+pub fn cholesky_symbolic(a: &SparseColMat<usize, f64>) -> Result<SymbolicLlt<usize>, FactorError> {
+    SymbolicLlt::try_new(a.symbolic(), Side::Lower).map_err(|e| FactorError::Other(format!("{e:?}")))
+}
+
+/// Numeric Cholesky with a symbolic analysis of the same pattern.
+pub fn cholesky_with(symbolic: &SymbolicLlt<usize>, a: &SparseColMat<usize, f64>) -> Result<Factor, FactorError> {
+    Llt::try_new_with_symbolic(symbolic.clone(), a.as_ref(), Side::Lower).map_err(|e| match e {
         faer::sparse::linalg::LltError::Numeric(faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot {
             index,
         }) => FactorError::NotPositiveDefinite { pivot: index },
@@ -186,6 +196,12 @@ pub enum ConditionMethod {
     /// 1-norm estimate for non-symmetric tangents (`lambda_min` and
     /// `lambda_max` then hold `1/|A^-1|_1` and `|A|_1`).
     OneNormEstimate,
+    /// The Cholesky factorisation broke down: the matrix is singular to
+    /// working precision (condition number infinite); `lambda_min` and
+    /// `lambda_max` hold dense eigenvalues when the matrix is small enough
+    /// (`lambda_min` then sits at round-off of `lambda_max`, either sign),
+    /// else 0 and NaN.
+    NotPositiveDefinite,
 }
 
 impl ConditionMethod {
@@ -195,6 +211,7 @@ impl ConditionMethod {
             ConditionMethod::DenseLanczosInverse => "dense+lanczos-inv",
             ConditionMethod::Lanczos => "lanczos",
             ConditionMethod::OneNormEstimate => "1-norm est",
+            ConditionMethod::NotPositiveDefinite => "singular",
         }
     }
 }
@@ -206,6 +223,23 @@ pub struct Condition {
     pub lambda_min: f64,
     pub lambda_max: f64,
     pub method: ConditionMethod,
+}
+
+/// Eigenvalues (ascending) of a symmetric matrix given by its lower triangle,
+/// densely.
+pub fn dense_eigenvalues(a: &SparseColMat<usize, f64>) -> Option<Vec<f64>> {
+    let n = a.nrows();
+    let mut m = Mat::<f64>::zeros(n, n);
+    let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
+    for c in 0..n {
+        for k in cp[c]..cp[c + 1] {
+            m[(ri[k], c)] += v[k];
+            if ri[k] != c {
+                m[(c, ri[k])] += v[k];
+            }
+        }
+    }
+    m.self_adjoint_eigenvalues(Side::Lower).ok()
 }
 
 /// Condition number of the SPD matrix `a` (lower triangle) with Cholesky
@@ -222,17 +256,7 @@ pub fn condition(a: &SparseColMat<usize, f64>, factor: &Factor, dense_limit: usi
     }
     let inverse_min = || 1.0 / lanczos_max(n, |x| solve(factor, x));
     if n <= dense_limit {
-        let mut m = Mat::<f64>::zeros(n, n);
-        let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
-        for c in 0..n {
-            for k in cp[c]..cp[c + 1] {
-                m[(ri[k], c)] += v[k];
-                if ri[k] != c {
-                    m[(c, ri[k])] += v[k];
-                }
-            }
-        }
-        if let Ok(ev) = m.self_adjoint_eigenvalues(Side::Lower) {
+        if let Some(ev) = dense_eigenvalues(a) {
             let (lo, hi) = (ev[0], ev[n - 1]);
             // Dense eigenvalues are accurate to about n eps lambda_max.
             if lo > 1e-10 * hi {

@@ -140,6 +140,68 @@ fn list(dir: &Path) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Header of the explicit-dynamics table (see [`dynamics_row`]).
+fn dynamics_header(first: &StepReport) -> String {
+    let mut h = format!(
+        "{:>6} {:>9} {:>8} {:>11} {:>11} {:>11} {:>11} {:>10} {:>10} {:>10} {:>10}",
+        "step",
+        "time s",
+        "unknowns",
+        "kinetic J",
+        "strain J",
+        "plastic J",
+        "balance/W0",
+        "cond M~",
+        "cond M",
+        "cond Mlump",
+        "CFL s/m"
+    );
+    for e in &first.errors {
+        h.push_str(&format!(" {:>16}", e.name));
+    }
+    h.push_str(&format!(" {:>8}", "total s"));
+    h
+}
+
+/// One explicit step: energies, the balance error over the initial energy,
+/// and (on condition steps) the mass condition numbers and the CFL number
+/// of the mass in use.
+fn dynamics_row(r: &StepReport) -> String {
+    let d = r.dynamics.as_ref().expect("a dynamics report");
+    let e = &r.energy;
+    let balance = if d.initial_energy > 0.0 {
+        d.energy_error / d.initial_energy
+    } else {
+        d.energy_error
+    };
+    let c = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3e}"));
+    let cond = d.conditioning.as_ref();
+    let cfl = cond.and_then(|c| match d.mass {
+        mpmlab::scene::MassKind::Stabilised => c.cfl_stabilised,
+        mpmlab::scene::MassKind::Consistent => c.cfl_consistent,
+        mpmlab::scene::MassKind::Lumped => c.cfl_lumped,
+    });
+    let mut s = format!(
+        "{:>6} {:>9.4} {:>8} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.3e} {:>10} {:>10} {:>10} {:>10}",
+        r.step,
+        d.time,
+        r.unknowns,
+        e.kinetic,
+        e.strain,
+        e.plastic_dissipation,
+        balance,
+        c(cond.map(|c| c.mass_stabilised.value)),
+        c(cond.map(|c| c.mass_consistent.value)),
+        c(cond.map(|c| c.mass_lumped.value)),
+        c(cfl)
+    );
+    for e in &r.errors {
+        s.push_str(&format!(" {:>16.4e}", e.value));
+    }
+    s.push_str(&format!(" {:>8.4}", r.timings.total));
+    s
+}
+
 fn header(first: Option<&StepReport>) -> String {
     let mut h = format!(
         "{:>5} {:>7} {:>8} {:>5} {:>10} {:>10} {:>18} {:>11} {:>11}",
@@ -220,10 +282,19 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
         match sim.step() {
             Ok(r) => {
                 if !quiet {
-                    if last.is_none() {
-                        out!("{}", header(Some(&r)));
+                    match (&r.dynamics, last.is_none()) {
+                        (Some(_), true) => out!("{}", dynamics_header(&r)),
+                        (None, true) => out!("{}", header(Some(&r))),
+                        _ => {}
                     }
-                    out!("{}", row(&r));
+                    out!(
+                        "{}",
+                        if r.dynamics.is_some() {
+                            dynamics_row(&r)
+                        } else {
+                            row(&r)
+                        }
+                    );
                 }
                 total_time += r.timings.total;
                 if let Some(rec) = recorder.as_mut() {
@@ -268,6 +339,19 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
             } else {
                 format!(", {}", errs.join(", "))
             }
+        );
+    }
+    if let Some((r, d)) = last.as_ref().and_then(|r| r.dynamics.as_ref().map(|d| (r, d))) {
+        out!(
+            "dynamics: t = {:.6} s, kinetic {:.6e} J, strain {:.6e} J, plastic {:.6e} J, initial {:.6e} J, balance error {:.3e} J, momentum ({:.6e}, {:.6e}) kg m/s",
+            d.time,
+            r.energy.kinetic,
+            r.energy.strain,
+            r.energy.plastic_dissipation,
+            d.initial_energy,
+            d.energy_error,
+            d.momentum[0],
+            d.momentum[1]
         );
     }
     if let Some(r) = &last {

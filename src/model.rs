@@ -101,6 +101,7 @@ impl Model {
         if scene.materials.is_empty() {
             return Err(FieldError::new("material", "at least one [[material]] is needed"));
         }
+        let finite_kind = scene.analysis.kind != crate::scene::AnalysisKind::QuasiStaticLinear;
         for (k, m) in scene.materials.iter().enumerate() {
             let f = |n: &str| format!("material[{k}].{n}");
             if material_names.contains(&m.name) {
@@ -117,10 +118,10 @@ impl Model {
                     None
                 }
                 MaterialModel::VonMises => {
-                    if scene.analysis.kind != crate::scene::AnalysisKind::QuasiStaticFinite {
+                    if !finite_kind {
                         return Err(FieldError::new(
                             f("model"),
-                            "von Mises plasticity needs kind = \"quasi-static-finite\"",
+                            "von Mises plasticity needs kind = \"quasi-static-finite\" or \"explicit-dynamics\"",
                         ));
                     }
                     match m.yield_stress {
@@ -134,19 +135,24 @@ impl Model {
                     }
                 }
             };
-            if scene.analysis.kind == crate::scene::AnalysisKind::QuasiStaticFinite
-                && m.plane != crate::scene::Plane::Strain
-            {
+            if finite_kind && m.plane != crate::scene::Plane::Strain {
                 return Err(FieldError::new(
                     f("plane"),
-                    "the finite-deformation analysis is plane strain",
+                    "the finite-deformation and explicit analyses are plane strain",
                 ));
             }
             yield_stress.push(ys);
-            if !(m.e > 0.0 && m.e.is_finite()) {
+            // Explicit dynamics needs no stiffness matrix: E = 0 is a
+            // stress-free material (G 5.1.2's stretching ghost).
+            let explicit = scene.analysis.kind == crate::scene::AnalysisKind::ExplicitDynamics;
+            if !((m.e > 0.0 || (explicit && m.e == 0.0)) && m.e.is_finite()) {
                 return Err(FieldError::new(
                     f("E"),
-                    format!("Young's modulus must be positive, got {}", m.e),
+                    format!(
+                        "Young's modulus must be positive{}, got {}",
+                        if explicit { " or zero" } else { "" },
+                        m.e
+                    ),
                 ));
             }
             if !(m.nu > -1.0 && m.nu < 0.5) {
@@ -211,7 +217,8 @@ impl Model {
             if b.placement == Placement::Polar {
                 polar_points(b, density, k, &mut points).map_err(|(field, m)| FieldError::new(f(field), m))?;
             } else if b.placement == Placement::Lattice {
-                lattice_points(b, density, k, &mut points).map_err(|(field, m)| FieldError::new(f(field), m))?;
+                lattice_points(b, &region, density, k, &mut points)
+                    .map_err(|(field, m)| FieldError::new(f(field), m))?;
             } else {
                 generate_points(&grid, &region, b.points_per_cell, b.placement, density, k, &mut points)
                     .map_err(|m| FieldError::new(f("placement"), m))?;
@@ -221,6 +228,31 @@ impl Model {
                     f("region"),
                     "the body is empty: no cell overlaps its region",
                 ));
+            }
+            let moving = b.velocity != [0.0; 2] || b.velocity_gradient.is_some();
+            if moving && scene.analysis.kind != crate::scene::AnalysisKind::ExplicitDynamics {
+                return Err(FieldError::new(
+                    f("velocity"),
+                    "initial velocities need kind = \"explicit-dynamics\"",
+                ));
+            }
+            let l = b.velocity_gradient.unwrap_or([[0.0; 2]; 2]);
+            if !b
+                .velocity
+                .iter()
+                .chain(l.iter().flatten())
+                .chain(&b.velocity_centre)
+                .all(|v| v.is_finite())
+            {
+                return Err(FieldError::new(f("velocity"), "velocities must be finite"));
+            }
+            let c = b.velocity_centre;
+            for p in before..points.len() {
+                let d = [points.x[p][0] - c[0], points.x[p][1] - c[1]];
+                points.v[p] = [
+                    b.velocity[0] + l[0][0] * d[0] + l[0][1] * d[1],
+                    b.velocity[1] + l[1][0] * d[0] + l[1][1] * d[1],
+                ];
             }
             if b.basis == BasisKind::Gimp {
                 for p in before..points.len() {
@@ -355,6 +387,39 @@ impl Model {
 
         let exact = match &scene.exact {
             None => None,
+            Some(ExactSpec::FreeMotion {}) => {
+                let duration = match (scene.analysis.kind, scene.analysis.duration) {
+                    (crate::scene::AnalysisKind::ExplicitDynamics, Some(d)) => d,
+                    _ => {
+                        return Err(FieldError::new(
+                            "exact.name",
+                            "free-motion needs kind = \"explicit-dynamics\" with a duration",
+                        ))
+                    }
+                };
+                let strained = bodies
+                    .iter()
+                    .zip(&scene.bodies)
+                    .any(|(b, spec)| materials[b.material].e != 0.0 && spec.velocity_gradient.is_some());
+                if strained {
+                    return Err(FieldError::new(
+                        "exact.name",
+                        "free motion with a velocity gradient is exact only for stress-free (E = 0) bodies",
+                    ));
+                }
+                let fields = scene
+                    .bodies
+                    .iter()
+                    .map(|b| {
+                        (
+                            b.velocity,
+                            b.velocity_gradient.unwrap_or([[0.0; 2]; 2]),
+                            b.velocity_centre,
+                        )
+                    })
+                    .collect();
+                Some(ExactSolution::FreeMotion { fields, duration })
+            }
             Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
         };
 
@@ -370,6 +435,14 @@ impl Model {
             boundaries.push(b);
         }
 
+        if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
+            validate_explicit(a, &dirichlet)?;
+        } else if a.duration.is_some() {
+            return Err(FieldError::new(
+                "analysis.duration",
+                "only for kind = \"explicit-dynamics\"",
+            ));
+        }
         let mut a = a.clone();
         if let Some(d) = a.delta {
             if !(d > 0.0 && d <= grid.h) {
@@ -534,6 +607,45 @@ impl Model {
     }
 }
 
+/// Settings an explicit-dynamics analysis needs.
+fn validate_explicit(a: &AnalysisSpec, dirichlet: &[GridDirichlet]) -> Result<(), FieldError> {
+    match a.duration {
+        Some(d) if d > 0.0 && d.is_finite() => {}
+        Some(_) => return Err(FieldError::new("analysis.duration", "must be positive")),
+        None => {
+            return Err(FieldError::new(
+                "analysis.duration",
+                "explicit dynamics needs the simulated time `duration` (s)",
+            ))
+        }
+    }
+    if let Some(g) = a.gamma_m {
+        if !(g >= 0.0 && g.is_finite()) {
+            return Err(FieldError::new("analysis.gamma_m", "must be zero (off) or positive"));
+        }
+    }
+    if !(a.blowup_factor > 1.0) {
+        return Err(FieldError::new("analysis.blowup_factor", "must exceed 1"));
+    }
+    if dirichlet.iter().any(|d| d.value.iter().flatten().any(|v| *v != 0.0)) {
+        return Err(FieldError::new(
+            "dirichlet",
+            "explicit dynamics supports fixed and roller supports only (zero values)",
+        ));
+    }
+    Ok(())
+}
+
+impl Model {
+    /// The ghost mass penalty `gamma_M` (kg/m^3): the scene's, or a quarter
+    /// of the largest material density (G 3.3).
+    pub fn gamma_m(&self) -> f64 {
+        self.analysis
+            .gamma_m
+            .unwrap_or_else(|| 0.25 * self.materials.iter().map(|m| m.density).fold(0.0, f64::max))
+    }
+}
+
 fn dist2(a: P2, b: P2) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
 }
@@ -642,6 +754,7 @@ fn build_exact(
             })
         }
         ExactSpec::SimpleShear { shear, x0 } => Ok(ExactSolution::SimpleShear { g: shear, x0, material }),
+        ExactSpec::FreeMotion {} => Err(FieldError::new("exact.name", "free-motion is built by the caller")),
         ExactSpec::UniaxialY { strain_yy, anchor } => {
             if !strain_yy.is_finite() || !anchor.iter().all(|a| a.is_finite()) {
                 return Err(FieldError::new("exact", "parameters must be finite"));
@@ -818,22 +931,30 @@ fn polar_points(b: &BodySpec, density: f64, body: usize, pts: &mut Points) -> Re
 }
 
 /// Points of a lattice placement: `nx x ny` points at the centres of equal
-/// sub-rectangles of a rectangle region.
-fn lattice_points(b: &BodySpec, density: f64, body: usize, pts: &mut Points) -> Result<(), (&'static str, String)> {
-    let RegionSpec::Rectangle { min, max } = b.region else {
-        return Err(("region", "lattice placement needs a rectangle region".into()));
-    };
+/// sub-rectangles of the region's bounding box, kept where the centre lies
+/// inside the region (all of them for a rectangle).
+fn lattice_points(
+    b: &BodySpec,
+    region: &Region,
+    density: f64,
+    body: usize,
+    pts: &mut Points,
+) -> Result<(), (&'static str, String)> {
+    let (min, max) = region.bounds();
     let [nx, ny] = b
         .lattice
         .ok_or(("lattice", "lattice placement needs `lattice = [nx, ny]`".to_string()))?;
     if nx == 0 || ny == 0 || nx * ny > 10_000_000 {
         return Err(("lattice", "point counts must be positive (and not absurd)".into()));
     }
+    let rectangle = matches!(b.region, RegionSpec::Rectangle { .. });
     let (dx, dy) = ((max[0] - min[0]) / nx as f64, (max[1] - min[1]) / ny as f64);
     for j in 0..ny {
         for i in 0..nx {
             let x = [min[0] + (i as f64 + 0.5) * dx, min[1] + (j as f64 + 0.5) * dy];
-            pts.push(x, dx * dy, density, [0.5 * dx, 0.5 * dy], body);
+            if rectangle || region.contains(x) {
+                pts.push(x, dx * dy, density, [0.5 * dx, 0.5 * dy], body);
+            }
         }
     }
     Ok(())

@@ -25,7 +25,7 @@ use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
 use crate::linalg::{self, Condition};
-use crate::material::hencky::{right_stretch, Hencky, Response};
+use crate::material::hencky::{right_stretch, Response};
 use crate::scene::ConditionMode;
 use crate::simulation::{Energy, Simulation, StepFailure, StepReport, Timings};
 use faer::sparse::SparseColMat;
@@ -37,23 +37,23 @@ fn norm(v: &[f64]) -> f64 {
 }
 
 /// `dF = I + sum_v du_v (x) g_v` over a point's stencil.
-fn increment_gradient(st: &crate::basis::Stencil, du: &[P2]) -> Matrix2<f64> {
+pub(crate) fn increment_gradient(st: &crate::basis::Stencil, du: &[P2]) -> Matrix2<f64> {
     let g = st.gradient(|n| du[n]);
     Matrix2::new(1.0 + g[0][0], g[0][1], g[1][0], 1.0 + g[1][1])
 }
 
-fn be_matrix(b: [f64; 4]) -> Matrix3<f64> {
+pub(crate) fn be_matrix(b: [f64; 4]) -> Matrix3<f64> {
     Matrix3::new(b[0], b[2], 0.0, b[2], b[1], 0.0, 0.0, 0.0, b[3])
 }
 
-struct Iterate {
+pub(crate) struct Iterate {
     responses: Vec<Option<Response>>,
     fint_free: Vec<f64>,
     fint_fixed: Vec<f64>,
 }
 
 /// Material response and internal force for nodal increments `du`.
-fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Iterate {
+pub(crate) fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Iterate {
     let pts = &sim.state.points;
     let mut it = Iterate {
         responses: Vec::with_capacity(pts.len()),
@@ -66,14 +66,9 @@ fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Iterate {
             continue;
         }
         let st = &map.stencils[p];
-        let body = &sim.model.bodies[pts.body[p]];
-        let m = sim.model.materials[body.material];
-        let mat = Hencky {
-            e: m.e,
-            nu: m.nu,
-            yield_stress: sim.model.yield_stress[body.material],
-        };
-        let r = mat.respond(&increment_gradient(st, du), &be_matrix(pts.b_e[p]));
+        let r = sim
+            .hencky(p)
+            .respond(&increment_gradient(st, du), &be_matrix(pts.b_e[p]));
         let v0 = pts.vol0[p];
         for (n, _, g) in st.iter() {
             for i in 0..2 {
@@ -121,7 +116,7 @@ fn group_tangent(sim: &Simulation, map: &Mapping, it: &Iterate, b: usize, out: &
 }
 
 /// Assemble the reduced tangent, with or without the ghost term.
-fn tangent(
+pub(crate) fn tangent(
     sim: &Simulation,
     map: &Mapping,
     pattern: &Pattern,
@@ -145,14 +140,14 @@ fn tangent(
 /// The ghost faces of this step (none when `gamma_K = 0`).
 fn ghost_faces(sim: &Simulation, map: &Mapping) -> Vec<GhostFace> {
     if sim.params.gamma_k > 0.0 {
-        ghost::faces(&sim.model.grid, &map.active_cells)
+        ghost::faces_of(&sim.model.grid, map)
     } else {
         Vec::new()
     }
 }
 
 /// Assembly blocks: the point groups, then the ghost faces.
-fn blocks_of<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
+pub(crate) fn blocks_of<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
     let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
     blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
     blocks
@@ -322,14 +317,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         pts.dissipation[p] += r.dissipation * pts.vol0[p];
         pts.yielding[p] = r.yielding;
         dissipation += pts.dissipation[p];
-        // Stored energy of Hencky elasticity: 1/2 lambda tr(e)^2 + mu e:e per V0.
-        let m = sim.model.materials[sim.model.bodies[pts.body[p]].material];
-        let (lam, mu) = (
-            m.e * m.nu / ((1.0 + m.nu) * (1.0 - 2.0 * m.nu)),
-            m.e / (2.0 * (1.0 + m.nu)),
-        );
-        let ev = r.b_e.symmetric_eigenvalues().map(|l| 0.5 * l.ln());
-        strain_energy += pts.vol0[p] * (0.5 * lam * ev.sum().powi(2) + mu * ev.dot(&ev));
+        strain_energy += pts.vol0[p] * sim.hencky(p).stored_energy(&r.b_e);
     }
     crate::simulation::check_points(&sim.model.grid, &pts, step, &residuals)?;
     let mut work = 0.0;
@@ -365,6 +353,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             strain: strain_energy,
             external_work: sim.state.external_work,
             plastic_dissipation: dissipation,
+            kinetic: 0.0,
         },
         condition,
         condition_unstabilised,
@@ -374,10 +363,22 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         errors,
         max_increment,
         boundaries,
+        dynamics: None,
     })
 }
 
 impl Simulation {
+    /// The finite-strain material of point `p`'s body.
+    pub(crate) fn hencky(&self, p: usize) -> crate::material::hencky::Hencky {
+        let body = &self.model.bodies[self.state.points.body[p]];
+        let m = self.model.materials[body.material];
+        crate::material::hencky::Hencky {
+            e: m.e,
+            nu: m.nu,
+            yield_stress: self.model.yield_stress[body.material],
+        }
+    }
+
     /// Largest relative difference between the assembled finite-deformation
     /// tangent (with the ghost term) and central finite differences of the
     /// out-of-balance force, at a reproducible pseudo-random trial increment

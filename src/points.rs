@@ -35,6 +35,8 @@ pub struct Points {
     pub yielding: Vec<bool>,
     /// GIMP half-lengths at generation (m).
     pub lp0: Vec<P2>,
+    /// Velocity (m/s; explicit dynamics).
+    pub v: Vec<P2>,
 }
 
 impl Points {
@@ -67,5 +69,20 @@ impl Points {
         self.dissipation.push(0.0);
         self.yielding.push(false);
         self.lp0.push(lp);
+        self.v.push([0.0; 2]);
+    }
+
+    /// Kinetic energy `sum_p 1/2 m_p |v_p|^2` (J per unit thickness).
+    pub fn kinetic_energy(&self) -> f64 {
+        (0..self.len())
+            .map(|p| 0.5 * self.mass[p] * (self.v[p][0].powi(2) + self.v[p][1].powi(2)))
+            .sum()
+    }
+
+    /// Momentum `sum_p m_p v_p` (kg m/s per unit thickness).
+    pub fn momentum(&self) -> P2 {
+        (0..self.len()).fold([0.0; 2], |a, p| {
+            [a[0] + self.mass[p] * self.v[p][0], a[1] + self.mass[p] * self.v[p][1]]
+        })
     }
 }

@@ -44,6 +44,8 @@ pub struct Params {
     pub gamma_k: f64,
     /// Implicit-boundary bandwidth over cell size.
     pub delta_over_h: f64,
+    /// Ghost mass penalty `gamma_M` (kg/m^3; explicit dynamics, G (20)).
+    pub gamma_m: f64,
 }
 
 /// Wall-clock time of each phase of a step (s).
@@ -66,6 +68,8 @@ pub struct Energy {
     pub external_work: f64,
     /// Plastic work dissipated so far.
     pub plastic_dissipation: f64,
+    /// `sum_p 1/2 m_p |v_p|^2` (explicit dynamics; 0 for quasi-static steps).
+    pub kinetic: f64,
 }
 
 /// What one successful step did.
@@ -103,6 +107,8 @@ pub struct StepReport {
     /// Each boundary as it was at the start of the step, with its traction
     /// resultant at this step's load factor.
     pub boundaries: Vec<BoundaryReport>,
+    /// Explicit dynamics: time, energy balance, mass conditioning.
+    pub dynamics: Option<crate::dynamics::DynamicsReport>,
 }
 
 /// Why a step did not complete. The state stays at the last good step.
@@ -126,8 +132,16 @@ pub enum StepFailure {
     },
     /// A boundary's spline could not be built from its points.
     Boundary { step: usize, name: String, reason: String },
-    /// A point would leave the grid.
-    LeftGrid { step: usize, point: usize, position: P2 },
+    /// A point (or, with `domain`, a corner of its GIMP domain, where the
+    /// basis would lose nodes and partition of unity) would leave the grid.
+    LeftGrid {
+        step: usize,
+        point: usize,
+        position: P2,
+        domain: bool,
+    },
+    /// An explicit step blew up: energy or grid velocities beyond bounds.
+    Diverged { step: usize, reason: String },
 }
 
 impl StepFailure {
@@ -138,7 +152,8 @@ impl StepFailure {
             | StepFailure::NotConverged { step, .. }
             | StepFailure::NonFinite { step, .. }
             | StepFailure::Boundary { step, .. }
-            | StepFailure::LeftGrid { step, .. } => *step,
+            | StepFailure::LeftGrid { step, .. }
+            | StepFailure::Diverged { step, .. } => *step,
         }
     }
 
@@ -165,13 +180,24 @@ impl fmt::Display for StepFailure {
                 residuals.last().copied().unwrap_or(f64::NAN),
                 fmt_residuals(residuals)
             ),
-            StepFailure::LeftGrid { step, point, position } => write!(
+            StepFailure::LeftGrid {
+                step,
+                point,
+                position,
+                domain,
+            } => write!(
                 f,
-                "step {step} failed: point {point} would move to ({:.4}, {:.4}), outside the grid; enlarge the grid",
-                position[0], position[1]
+                "step {step} failed: point {point}{} would reach ({:.4}, {:.4}), outside the grid; enlarge the grid",
+                if *domain { "'s GIMP domain" } else { "" },
+                position[0],
+                position[1]
             ),
+            StepFailure::Diverged { step, reason } => write!(f, "step {step} failed: diverged: {reason}"),
             StepFailure::Boundary { step, name, reason } => {
                 write!(f, "step {step} failed: boundary `{name}`: {reason}")
+            }
+            StepFailure::NonFinite { step, what, residuals } if residuals.is_empty() => {
+                write!(f, "step {step} failed: non-finite {what}")
             }
             StepFailure::NonFinite { step, what, residuals } => write!(
                 f,
@@ -202,6 +228,8 @@ pub(crate) struct State {
     pub(crate) iterations: usize,
     /// How far each moving implicit boundary has moved.
     pub(crate) ibm_offsets: Vec<P2>,
+    /// Explicit dynamics: kinetic plus strain energy at the start (J).
+    pub(crate) initial_energy: f64,
 }
 
 /// A saved state to return to with [`Simulation::restore`].
@@ -213,6 +241,8 @@ pub struct Simulation {
     pub(crate) model: Model,
     pub(crate) params: Params,
     pub(crate) state: State,
+    /// Explicit dynamics: the mass pattern of the last step.
+    pub(crate) mass_cache: crate::dynamics::MassCache,
 }
 
 impl Simulation {
@@ -224,6 +254,7 @@ impl Simulation {
             max_iterations: model.analysis.max_iterations,
             gamma_k: model.analysis.gamma_k,
             delta_over_h: model.analysis.delta_over_h,
+            gamma_m: model.gamma_m(),
         };
         let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
         let state = State {
@@ -234,8 +265,14 @@ impl Simulation {
             ghost_faces: Vec::new(),
             iterations: 0,
             ibm_offsets: vec![[0.0; 2]; model.ibm.len()],
+            initial_energy: model.points.kinetic_energy(),
         };
-        Simulation { model, params, state }
+        Simulation {
+            model,
+            params,
+            state,
+            mass_cache: Default::default(),
+        }
     }
 
     /// Parse, validate and build a scene.
@@ -340,8 +377,10 @@ impl Simulation {
                 steps: self.load_steps(),
             });
         }
-        if self.model.analysis.kind == crate::scene::AnalysisKind::QuasiStaticFinite {
-            return crate::newton::finite_step(self);
+        match self.model.analysis.kind {
+            crate::scene::AnalysisKind::QuasiStaticFinite => return crate::newton::finite_step(self),
+            crate::scene::AnalysisKind::ExplicitDynamics => return crate::dynamics::explicit_step(self),
+            crate::scene::AnalysisKind::QuasiStaticLinear => {}
         }
         let step = self.state.step + 1;
         let lambda0 = self.state.step as f64 / self.load_steps() as f64;
@@ -412,7 +451,7 @@ impl Simulation {
         // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
         let gamma = self.params.gamma_k;
         let faces = if gamma > 0.0 {
-            ghost::faces(grid, &map.active_cells)
+            ghost::faces_of(grid, &map)
         } else {
             Vec::new()
         };
@@ -656,6 +695,7 @@ impl Simulation {
                 strain: strain_energy,
                 external_work: self.state.external_work,
                 plastic_dissipation: 0.0,
+                kinetic: 0.0,
             },
             condition,
             condition_unstabilised,
@@ -665,6 +705,7 @@ impl Simulation {
             errors,
             max_increment,
             boundaries,
+            dynamics: None,
         })
     }
 
@@ -923,6 +964,7 @@ pub(crate) fn check_points(
             step,
             point: p,
             position: pts.x[p],
+            domain: false,
         });
     }
     Ok(())

@@ -78,6 +78,15 @@ impl Hencky {
         (self.e / (3.0 * (1.0 - 2.0 * self.nu)), self.e / (2.0 * (1.0 + self.nu)))
     }
 
+    /// Stored energy per reference volume of the elastic state `b_e`:
+    /// `1/2 lambda tr(e)^2 + mu e:e` with `e = ln(b_e)/2` (J/m^3).
+    pub fn stored_energy(&self, b_e: &Matrix3<f64>) -> f64 {
+        let (k, mu) = self.moduli();
+        let lambda = k - 2.0 * mu / 3.0;
+        let e = b_e.symmetric_eigenvalues().map(|l| 0.5 * l.ln());
+        0.5 * lambda * e.sum().powi(2) + mu * e.dot(&e)
+    }
+
     /// Principal return map: Kirchhoff principal stresses, elastic principal
     /// strains, the 3 x 3 principal tangent `d t / d e`, the shear factor `c`.
     fn principal(&self, e_tr: [f64; 3]) -> ([f64; 3], [f64; 3], Matrix3<f64>, f64, bool) {
@@ -108,6 +117,16 @@ impl Hencky {
     /// Stress, updated elastic state and tangent for the increment `df`
     /// from the elastic left Cauchy-Green tensor `b_n`.
     pub fn respond(&self, df: &Matrix2<f64>, b_n: &Matrix3<f64>) -> Response {
+        self.response(df, b_n, true)
+    }
+
+    /// As [`Hencky::respond`] without the tangent (`a` is zero): what an
+    /// explicit step needs.
+    pub fn respond_stress(&self, df: &Matrix2<f64>, b_n: &Matrix3<f64>) -> Response {
+        self.response(df, b_n, false)
+    }
+
+    fn response(&self, df: &Matrix2<f64>, b_n: &Matrix3<f64>, with_tangent: bool) -> Response {
         let f3 = Matrix3::new(df[(0, 0)], df[(0, 1)], 0.0, df[(1, 0)], df[(1, 1)], 0.0, 0.0, 0.0, 1.0);
         let b_tr = f3 * b_n * f3.transpose();
         let (q, l) = eig_plane(&b_tr);
@@ -144,7 +163,7 @@ impl Hencky {
         };
         let bn_ft = b_n * f3.transpose();
         let mut a = [[[[0.0; 2]; 2]; 2]; 2];
-        for k in 0..2 {
+        for k in (0..2).filter(|_| with_tangent) {
             for l2 in 0..2 {
                 let mut e = Matrix3::zeros();
                 e[(k, l2)] = 1.0;

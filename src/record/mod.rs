@@ -1,7 +1,8 @@
 //! rerun recordings of a run: one `.rrd` file per run.
 //!
-//! Timelines: `step` (load step) and `iteration` (a global counter over
-//! every residual evaluation of the run). Entities:
+//! Timelines: `step` (load step), `iteration` (a global counter over
+//! every residual evaluation of the run) and, for explicit dynamics, `time`
+//! (simulated seconds). Entities:
 //!
 //! | entity | archetype | when |
 //! |---|---|---|
@@ -25,6 +26,9 @@
 //! | `metrics/error/<measure>` | Scalars | every step with an exact solution |
 //! | `metrics/time/<phase>` | Scalars (s) | every step |
 //! | `metrics/unknowns` | Scalars | every step |
+//! | `metrics/energy/{kinetic,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics; also on `time`) | every step |
+//! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (explicit dynamics) | every step |
+//! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, failures, end) | as they happen |
 //!
 //! The engine knows nothing of this module: it reads reports and state.
@@ -153,6 +157,9 @@ impl Recorder {
     /// Log the points and active cells at the simulation's current step.
     pub fn log_state(&self, sim: &Simulation) -> Result<(), RecordError> {
         self.rec.set_time_sequence("step", sim.step_index() as i64);
+        if let Some(t) = sim.time() {
+            self.rec.set_duration_secs("time", t);
+        }
         let pts = sim.points();
         let values = self.field.values(sim);
         let (lo, hi) = colormap::range(values.iter().copied());
@@ -232,11 +239,13 @@ impl Recorder {
     pub fn log_step(&mut self, report: &StepReport, sim: &Simulation) -> Result<(), RecordError> {
         self.log_residuals(report.step, &report.residuals)?;
         self.rec.set_time_sequence("step", report.step as i64);
-        if let Some(c) = &report.condition {
+        if let Some(d) = &report.dynamics {
+            self.log_dynamics(report, d)?;
+        } else if let Some(c) = &report.condition {
             self.scalar("metrics/condition/stiffness", c.value)?;
             self.scalar("metrics/log10/condition/stiffness", c.value.log10())?;
         }
-        if let Some(c) = &report.condition_unstabilised {
+        if let (None, Some(c)) = (&report.dynamics, &report.condition_unstabilised) {
             self.scalar("metrics/condition/stiffness_unstabilised", c.value)?;
             self.scalar("metrics/log10/condition/stiffness_unstabilised", c.value.log10())?;
         }
@@ -277,6 +286,45 @@ impl Recorder {
             self.scalar(&format!("{base}/resultant_y"), b.resultant[1])?;
         }
         self.log_state(sim)
+    }
+
+    /// Explicit dynamics: energies, balance, momentum and (on condition
+    /// steps) mass conditioning and CFL numbers, on `step` and `time`.
+    fn log_dynamics(&self, report: &StepReport, d: &crate::dynamics::DynamicsReport) -> Result<(), RecordError> {
+        self.rec.set_duration_secs("time", d.time);
+        let e = &report.energy;
+        self.scalar("metrics/energy/kinetic", e.kinetic)?;
+        self.scalar("metrics/energy/total", e.kinetic + e.strain)?;
+        self.scalar("metrics/energy/balance_error", d.energy_error)?;
+        if d.initial_energy > 0.0 {
+            self.scalar(
+                "metrics/energy/balance_error_relative",
+                d.energy_error / d.initial_energy,
+            )?;
+        }
+        self.scalar("metrics/momentum/x", d.momentum[0])?;
+        self.scalar("metrics/momentum/y", d.momentum[1])?;
+        self.scalar("metrics/dynamics/max_grid_speed", d.max_speed)?;
+        if let Some(c) = &d.conditioning {
+            for (name, v) in [
+                ("mass_consistent", c.mass_consistent.value),
+                ("mass_stabilised", c.mass_stabilised.value),
+                ("mass_lumped", c.mass_lumped.value),
+            ] {
+                self.scalar(&format!("metrics/condition/{name}"), v)?;
+                self.scalar(&format!("metrics/log10/condition/{name}"), v.log10())?;
+            }
+            for (name, v) in [
+                ("consistent", c.cfl_consistent),
+                ("stabilised", c.cfl_stabilised),
+                ("lumped", c.cfl_lumped),
+            ] {
+                if let Some(v) = v {
+                    self.scalar(&format!("metrics/cfl/{name}"), v)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     fn log_residuals(&mut self, step: usize, residuals: &[f64]) -> Result<(), RecordError> {

@@ -122,8 +122,10 @@ pub enum Placement {
     /// points on a polar lattice including both radii and both end angles,
     /// each with its tributary area as volume (B 4.3).
     Polar,
-    /// For a rectangle region: `lattice = [nx, ny]` points in a regular
-    /// array over the rectangle, independent of the grid (B 4.2).
+    /// `lattice = [nx, ny]` points in a regular array over the region's
+    /// bounding box, independent of the grid (B 4.2), each with the area of
+    /// its lattice cell; for a non-rectangular region only the cells whose
+    /// centre lies inside are kept (G's ghost discretisations).
     Lattice,
 }
 
@@ -149,6 +151,15 @@ pub struct BodySpec {
     /// Polar placement only: points along the circumference.
     #[serde(default)]
     pub circumferential_points: Option<usize>,
+    /// Explicit dynamics: initial velocity (m/s) ...
+    #[serde(default)]
+    pub velocity: [f64; 2],
+    /// ... plus `L (x - velocity_centre)` with this velocity gradient `L`
+    /// (1/s, rows `[[dvx/dx, dvx/dy], [dvy/dx, dvy/dy]]`).
+    #[serde(default)]
+    pub velocity_gradient: Option<[[f64; 2]; 2]>,
+    #[serde(default)]
+    pub velocity_centre: [f64; 2],
 }
 
 /// `[[ibm]]`: a Dirichlet condition on a straight line or polyline at any
@@ -343,6 +354,45 @@ pub enum AnalysisKind {
     /// Finite deformation, updated Lagrangian, Newton-Raphson per load step
     /// (G section 2, AMPLE); plane strain.
     QuasiStaticFinite,
+    /// Explicit dynamics (G 2.3): `load_steps` time steps over `duration`,
+    /// finite deformation (Hencky, von Mises), plane strain.
+    ExplicitDynamics,
+}
+
+/// Mass matrix of explicit dynamics (G 2.3, 3.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MassKind {
+    /// Row sums on the diagonal: `M_bar = diag(sum_p m_p S_vp)`.
+    Lumped,
+    /// `M = sum_p m_p S_p^T S_p`: singular-prone as points barely touch nodes.
+    Consistent,
+    /// `M + gamma_M J_G` (G (20)).
+    #[default]
+    #[serde(alias = "stabilized")]
+    Stabilised,
+}
+
+/// When the stress is updated in an explicit step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StressUpdate {
+    /// Update stress first, from the start-of-step grid velocities.
+    #[default]
+    Usf,
+    /// Update stress last, from the end-of-step grid velocities.
+    Usl,
+}
+
+/// How points take the grid's new velocities.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum VelocityUpdate {
+    /// Add the interpolated grid acceleration: `v_p += dt sum_v S_vp a_v`.
+    #[default]
+    Flip,
+    /// Overwrite with the interpolated grid velocity: `v_p = sum_v S_vp v_v`.
+    Pic,
 }
 
 /// How condition numbers are computed each step.
@@ -385,6 +435,37 @@ pub struct AnalysisSpec {
     /// Largest system solved with dense eigenvalues in `auto` mode.
     #[serde(default = "default_dense_limit")]
     pub dense_limit: usize,
+    /// Explicit dynamics: simulated time (s), split into `load_steps` equal steps.
+    #[serde(default)]
+    pub duration: Option<f64>,
+    /// Explicit dynamics: the mass matrix.
+    #[serde(default)]
+    pub mass: MassKind,
+    /// Explicit dynamics: ghost mass penalty `gamma_M` (kg/m^3; G (20));
+    /// default a quarter of the largest material density (G 3.3).
+    #[serde(default)]
+    pub gamma_m: Option<f64>,
+    #[serde(default)]
+    pub stress_update: StressUpdate,
+    #[serde(default)]
+    pub velocity_update: VelocityUpdate,
+    /// Explicit dynamics: mass condition numbers and the CFL number every
+    /// this many steps (0: never; they need dense or Lanczos eigenvalues).
+    #[serde(default = "one")]
+    pub condition_every: usize,
+    /// Explicit dynamics: a step fails as diverged when the kinetic plus
+    /// strain energy exceeds this many times the initial energy plus the
+    /// work done on the bodies.
+    #[serde(default = "default_blowup")]
+    pub blowup_factor: f64,
+}
+
+fn one() -> usize {
+    1
+}
+
+fn default_blowup() -> f64 {
+    100.0
 }
 
 fn default_tolerance() -> f64 {
@@ -443,6 +524,10 @@ pub enum ExactSpec {
     Kirsch { stress: f64, radius: f64 },
     /// Simple shear `u = (0, shear (x - x0))`, `s_xy = mu shear`.
     SimpleShear { shear: f64, x0: f64 },
+    /// Explicit dynamics of stress-free bodies: each point keeps the initial
+    /// velocity of its body (`velocity`, `velocity_gradient`), so its
+    /// displacement is `t v0(X)` (G 5.1).
+    FreeMotion {},
 }
 
 impl Scene {

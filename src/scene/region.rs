@@ -67,6 +67,13 @@ pub enum RegionSpec {
         base: Box<RegionSpec>,
         subtract: Vec<RegionSpec>,
     },
+    /// The "ghost" emoji of G 5.1-5.3 in a `size x size` box with lower-left
+    /// corner `min`: a dome head, straight sides, a zigzag hem of three
+    /// points and two round eye holes ([`ghost_outline`]).
+    Ghost {
+        min: P2,
+        size: f64,
+    },
     /// `region` rotated by `angle_deg` (counter-clockwise) about `about`.
     Rotated {
         angle_deg: f64,
@@ -230,6 +237,25 @@ impl RegionSpec {
                 }
                 Ok(r)
             }
+            RegionSpec::Ghost { min, size } => {
+                finite(&f("min"), min)?;
+                if !(*size > 0.0 && size.is_finite()) {
+                    return Err(FieldError::new(f("size"), "must be positive"));
+                }
+                let (outline, eyes) = ghost_outline(*min, *size);
+                RegionSpec::Difference {
+                    base: Box::new(RegionSpec::Polygon { vertices: outline }),
+                    subtract: eyes
+                        .into_iter()
+                        .map(|(center, radius)| RegionSpec::Circle {
+                            center,
+                            radius,
+                            tolerance: None,
+                        })
+                        .collect(),
+                }
+                .build(path)
+            }
             RegionSpec::Rotated {
                 angle_deg,
                 about,
@@ -241,4 +267,32 @@ impl RegionSpec {
             }
         }
     }
+}
+
+/// Area of the ghost over the area of its box. G 5.2 gives the initial
+/// energy W0 = 2.14726 J of two ghosts of density 1000 kg/m^3 moving at
+/// |v| = 0.1 sqrt(2) m/s, so each ghost has 2.14726 / 20 = 0.107363 m^2 in
+/// a 0.4 m box: a fraction 0.671019.
+pub const GHOST_AREA_FRACTION: f64 = 0.671019;
+
+/// Eye radius over the box size.
+const GHOST_EYE: f64 = 0.12;
+
+/// The ghost's outline (counter-clockwise) and its eyes `(centre, radius)`.
+/// In units of the box: a semicircular head of radius 1/2 on a unit-wide
+/// body of height 1/2 whose hem has two triangular notches of depth `t`;
+/// `t` is chosen so that the area is [`GHOST_AREA_FRACTION`] of the box.
+pub fn ghost_outline(min: P2, size: f64) -> (Vec<P2>, Vec<(P2, f64)>) {
+    use std::f64::consts::PI;
+    // head + body - notches - eyes = PI/8 + 1/2 - t/2 - 2 PI r_e^2.
+    let t = 2.0 * (PI / 8.0 + 0.5 - 2.0 * PI * GHOST_EYE * GHOST_EYE - GHOST_AREA_FRACTION);
+    let at = |x: f64, y: f64| [min[0] + size * x, min[1] + size * y];
+    let mut outline = vec![at(0.0, 0.0), at(0.25, t), at(0.5, 0.0), at(0.75, t), at(1.0, 0.0)];
+    let n = 64;
+    for k in 0..=n {
+        let a = PI * k as f64 / n as f64;
+        outline.push(at(0.5 + 0.5 * a.cos(), 0.5 + 0.5 * a.sin()));
+    }
+    let eyes = vec![(at(0.32, 0.6), GHOST_EYE * size), (at(0.68, 0.6), GHOST_EYE * size)];
+    (outline, eyes)
 }

@@ -11,6 +11,8 @@ pub struct View {
     pub step: usize,
     pub load_steps: usize,
     pub load_factor: f64,
+    /// Simulated time (s), explicit dynamics only.
+    pub time: Option<f64>,
     pub positions: Vec<[f64; 2]>,
     /// The colour field at every point.
     pub values: Vec<f64>,
@@ -67,6 +69,7 @@ impl View {
             step: sim.step_index(),
             load_steps: sim.load_steps(),
             load_factor: sim.load_factor(),
+            time: sim.time(),
             positions: sim.points().x.clone(),
             values: field.values(sim),
             field,
@@ -100,6 +103,12 @@ pub enum Action {
     RaiseDelta,
     /// Implicit-boundary bandwidth delta/h divided by 10.
     LowerDelta,
+    /// Ghost mass penalty gamma_M times 10 (from 0: rho/4).
+    RaiseGammaM,
+    /// Ghost mass penalty gamma_M divided by 10.
+    LowerGammaM,
+    /// Step continuously until paused, finished or failed.
+    RunPause,
     CloseOverlay,
     NextField,
     Quit,
@@ -114,6 +123,8 @@ pub enum Command {
     SetGammaK(f64),
     /// New implicit-boundary bandwidth `delta/h` (from the next step).
     SetDeltaOverH(f64),
+    /// New ghost mass penalty `gamma_M` (from the next step).
+    SetGammaM(f64),
     Quit,
 }
 
@@ -141,6 +152,10 @@ pub struct App {
     /// A message for the status line (e.g. recording errors).
     pub status: String,
     pub quit: bool,
+    /// Stepping continuously.
+    pub running: bool,
+    /// `gamma_M` to start from when raising it from 0 (rho/4 of the densest material).
+    pub default_gamma_m: f64,
 }
 
 impl App {
@@ -166,7 +181,22 @@ impl App {
             modulus: sim.model().materials[0].e,
             status: String::new(),
             quit: false,
+            running: false,
+            default_gamma_m: 0.25 * sim.model().materials.iter().map(|m| m.density).fold(0.0, f64::max),
         }
+    }
+
+    /// The next step while running continuously (stops at the end or at a failure).
+    pub fn pending(&mut self) -> Option<Command> {
+        if !self.running || self.busy {
+            return None;
+        }
+        if self.failure.is_some() || self.finished() {
+            self.running = false;
+            return None;
+        }
+        self.busy = true;
+        Some(Command::Step)
     }
 
     pub fn finished(&self) -> bool {
@@ -232,6 +262,30 @@ impl App {
                 };
                 self.status = format!("delta/h = {new:.1e} from the next step");
                 Some(Command::SetDeltaOverH(new))
+            }
+            Action::RaiseGammaM | Action::LowerGammaM => {
+                if self.busy && !self.running {
+                    self.status = "wait for the step to finish before changing gamma_M".into();
+                    return None;
+                }
+                let g = self.params.gamma_m;
+                let new = match action {
+                    Action::RaiseGammaM if g == 0.0 => self.default_gamma_m,
+                    Action::RaiseGammaM => 10.0 * g,
+                    _ => g / 10.0,
+                };
+                self.status = format!("gamma_M = {new:.3e} kg/m^3 from the next step");
+                Some(Command::SetGammaM(new))
+            }
+            Action::RunPause => {
+                self.running = !self.running;
+                self.status = if self.running {
+                    "running (enter pauses)"
+                } else {
+                    "paused"
+                }
+                .into();
+                self.pending()
             }
             Action::CloseOverlay => {
                 self.show_help = false;

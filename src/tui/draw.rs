@@ -2,6 +2,7 @@
 
 use super::app::App;
 use crate::colormap;
+use crate::simulation::StepReport;
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
@@ -21,11 +22,14 @@ pub fn draw(frame: &mut Frame, app: &App) {
         Paragraph::new(Line::from(vec![
             Span::styled(" mpmlab ", Style::new().add_modifier(Modifier::BOLD).bg(Color::Blue)),
             Span::raw(format!(
-                " {}  | step {}/{}  load factor {:.3}  | {} points, grid {}x{} h={}",
+                " {}  | step {}/{}  {}  | {} points, grid {}x{} h={}",
                 app.scene_name,
                 app.view.step,
                 app.view.load_steps,
-                app.view.load_factor,
+                match app.view.time {
+                    Some(t) => format!("t = {t:.4} s"),
+                    None => format!("load factor {:.3}", app.view.load_factor),
+                },
                 app.points,
                 app.grid.nx,
                 app.grid.ny,
@@ -45,9 +49,17 @@ pub fn draw(frame: &mut Frame, app: &App) {
     .areas(side);
     draw_params(frame, app, params);
     draw_last_step(frame, app, last);
-    draw_residuals(frame, app, chart);
+    if app.view.time.is_some() {
+        draw_energies(frame, app, chart);
+    } else {
+        draw_residuals(frame, app, chart);
+    }
     draw_table(frame, app, table);
-    let keys = "space step · g/G gamma_K · ? help · q quit";
+    let keys = if app.view.time.is_some() {
+        "space step · enter run/pause · m/M gamma_M · ? help · q quit"
+    } else {
+        "space step · enter run/pause · g/G gamma_K · ? help · q quit"
+    };
     let rec = app
         .recording
         .as_deref()
@@ -164,12 +176,16 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
     } else {
         "ghost off".to_string()
     };
-    frame.render_widget(
-        Paragraph::new(format!(
+    let text = if app.view.time.is_some() {
+        format!("gamma_M {:.3e} kg/m^3  {ghost}  cond {:?}", p.gamma_m, p.condition)
+    } else {
+        format!(
             "{ghost}  delta/h {:.0e}  tol {:.1e}  max it {}  cond {:?}",
             p.delta_over_h, p.tolerance, p.max_iterations, p.condition
-        ))
-        .block(Block::default().borders(Borders::ALL).title(" parameters ")),
+        )
+    };
+    frame.render_widget(
+        Paragraph::new(text).block(Block::default().borders(Borders::ALL).title(" parameters ")),
         area,
     );
 }
@@ -251,6 +267,98 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
     frame.render_widget(chart, area);
 }
 
+/// Energies against time (explicit dynamics): kinetic, strain, plastic
+/// dissipation and their sum, as G Figs. 13-14 chart them.
+fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
+    use ratatui::widgets::{Axis, Chart, Dataset, GraphType};
+    type Part = (&'static str, Color, fn(&StepReport) -> f64);
+    let parts: [Part; 4] = [
+        ("kinetic", Color::Cyan, |r| r.energy.kinetic),
+        ("strain", Color::Yellow, |r| r.energy.strain),
+        ("plastic", Color::Red, |r| r.energy.plastic_dissipation),
+        ("total", Color::White, |r| {
+            r.energy.kinetic + r.energy.strain + r.energy.plastic_dissipation
+        }),
+    ];
+    let series: Vec<Vec<(f64, f64)>> = parts
+        .iter()
+        .map(|(_, _, f)| {
+            app.reports
+                .iter()
+                .filter_map(|r| r.dynamics.as_ref().map(|d| (d.time, f(r))))
+                .filter(|(_, v)| v.is_finite())
+                .collect()
+        })
+        .collect();
+    let tmax = series[0].last().map_or(1.0, |p| p.0).max(1e-12);
+    let emax = series.iter().flatten().map(|p| p.1).fold(0.0, f64::max).max(1e-300);
+    let datasets: Vec<Dataset> = parts
+        .iter()
+        .zip(&series)
+        .map(|((name, color, _), s)| {
+            Dataset::default()
+                .name(*name)
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(*color))
+                .data(s)
+        })
+        .collect();
+    let chart = Chart::new(datasets)
+        .block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(" energy (J) against time (s) "),
+        )
+        .x_axis(
+            Axis::default()
+                .bounds([0.0, tmax])
+                .labels(["0".to_string(), format!("{tmax:.3}")]),
+        )
+        .y_axis(
+            Axis::default()
+                .bounds([0.0, 1.05 * emax])
+                .labels(["0".to_string(), format!("{:.3e}", 1.05 * emax)]),
+        );
+    frame.render_widget(chart, area);
+}
+
+/// The explicit-dynamics lines of the last-step panel.
+fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport) -> Vec<Line<'static>> {
+    let e = &r.energy;
+    let mut lines = vec![
+        Line::raw(format!(
+            "t = {:.4} s (dt {:.2e} s)  {:?} mass, {:?}, {:?}",
+            d.time, d.dt, d.mass, d.stress_update, d.velocity_update
+        )),
+        Line::raw(format!(
+            "energy: kinetic {:.4e}  strain {:.4e}  plastic {:.4e} J",
+            e.kinetic, e.strain, e.plastic_dissipation
+        )),
+        Line::raw(format!(
+            "balance {:.3e} J ({:.2e} of W0 = {:.4e} J)  max grid speed {:.3e} m/s",
+            d.energy_error,
+            if d.initial_energy > 0.0 {
+                d.energy_error / d.initial_energy
+            } else {
+                f64::NAN
+            },
+            d.initial_energy,
+            d.max_speed
+        )),
+    ];
+    if let Some(c) = &d.conditioning {
+        lines.push(Line::raw(format!(
+            "cond: M~ {:.2e}  M {:.2e}  lumped {:.2e}  CFL {} s/m",
+            c.mass_stabilised.value,
+            c.mass_consistent.value,
+            c.mass_lumped.value,
+            c.cfl_stabilised.map_or("-".to_string(), |v| format!("{v:.3e}"))
+        )));
+    }
+    lines
+}
+
 fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
     let mut lines: Vec<Line> = Vec::new();
     if let Some(f) = &app.failure {
@@ -268,6 +376,24 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
     match app.reports.last() {
         None => lines.push(Line::raw("step 0: initial state (press space to step)")),
         Some(r) => {
+            if let Some(d) = &r.dynamics {
+                lines.push(Line::raw(format!(
+                    "step {}/{}  unknowns {}",
+                    r.step, r.load_steps, r.unknowns
+                )));
+                lines.extend(dynamics_lines(r, d));
+                let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
+                if !e.is_empty() {
+                    lines.push(Line::raw(format!("errors: {}", e.join("  "))));
+                }
+                frame.render_widget(
+                    Paragraph::new(lines)
+                        .wrap(Wrap { trim: true })
+                        .block(Block::default().borders(Borders::ALL).title(" last step ")),
+                    area,
+                );
+                return;
+            }
             let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.2e}")).collect();
             lines.push(Line::raw(format!(
                 "step {}/{}  load factor {:.3}  unknowns {}",
@@ -329,16 +455,27 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
 }
 
 fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
-    let header = Row::new(["step", "lambda", "unknowns", "residual", "cond(K)", "time s"])
-        .style(Style::new().add_modifier(Modifier::BOLD));
+    let header = if app.view.time.is_some() {
+        Row::new(["step", "t s", "unknowns", "bal/W0", "cond(M)", "time s"])
+    } else {
+        Row::new(["step", "lambda", "unknowns", "residual", "cond(K)", "time s"])
+    }
+    .style(Style::new().add_modifier(Modifier::BOLD));
     let visible = area.height.saturating_sub(3) as usize;
     let skip = app.reports.len().saturating_sub(visible);
     let rows = app.reports.iter().skip(skip).map(|r| {
         Row::new([
             Cell::from(r.step.to_string()),
-            Cell::from(format!("{:.3}", r.load_factor)),
+            Cell::from(match &r.dynamics {
+                Some(d) => format!("{:.3}", d.time),
+                None => format!("{:.3}", r.load_factor),
+            }),
             Cell::from(r.unknowns.to_string()),
-            Cell::from(format!("{:.1e}", r.residuals.last().copied().unwrap_or(f64::NAN))),
+            Cell::from(match &r.dynamics {
+                Some(d) if d.initial_energy > 0.0 => format!("{:.1e}", d.energy_error / d.initial_energy),
+                Some(d) => format!("{:.1e}", d.energy_error),
+                None => format!("{:.1e}", r.residuals.last().copied().unwrap_or(f64::NAN)),
+            }),
             Cell::from(r.condition.map_or("-".into(), |c| format!("{:.1e}", c.value))),
             Cell::from(format!("{:.3}", r.timings.total)),
         ])
@@ -362,11 +499,13 @@ fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
 fn draw_help(frame: &mut Frame, area: Rect) {
     let text = vec![
         Line::raw("space   take one load step"),
+        Line::raw("enter   run continuously / pause"),
         Line::raw("f       colour points by the next field"),
         Line::raw("c       show or hide boundary control points"),
         Line::raw("G / g   gamma_K x10 / /10 (from the next step)"),
         Line::raw("0       ghost stabilisation off / back on"),
         Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
+        Line::raw("M / m   ghost mass gamma_M x10 / /10"),
         Line::raw("?       show or hide this help"),
         Line::raw("Esc     close this help"),
         Line::raw("q       quit (the recording is closed cleanly)"),

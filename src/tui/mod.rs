@@ -29,6 +29,9 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('0') => Some(Action::ToggleGhost),
         KeyCode::Char('D') => Some(Action::RaiseDelta),
         KeyCode::Char('d') => Some(Action::LowerDelta),
+        KeyCode::Char('M') => Some(Action::RaiseGammaM),
+        KeyCode::Char('m') => Some(Action::LowerGammaM),
+        KeyCode::Enter => Some(Action::RunPause),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -111,6 +114,14 @@ fn engine(
                 let text = format!("parameter: delta/h = {d:e} from step {}", sim.step_index() + 1);
                 set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
+            Command::SetGammaM(g) => {
+                let params = crate::simulation::Params {
+                    gamma_m: g,
+                    ..sim.params().clone()
+                };
+                let text = format!("parameter: gamma_M = {g:e} kg/m^3 from step {}", sim.step_index() + 1);
+                set_params(&mut sim, &mut recorder, &updates, params, &text);
+            }
             Command::Quit => break,
         }
     }
@@ -135,6 +146,9 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
         while !app.quit {
             while let Ok(u) = up_rx.try_recv() {
                 app.update(u);
+            }
+            if let Some(cmd) = app.pending() {
+                let _ = cmd_tx.send(cmd);
             }
             terminal.draw(|f| draw::draw(f, &app))?;
             if event::poll(Duration::from_millis(50))? {

@@ -1,0 +1,792 @@
+//! Explicit dynamics (G 2.3, 3.3): one time step at a time.
+//!
+//! Per step, on the configuration at its start (the grid is reset):
+//!
+//! 1. map the points to the grid; with the stabilised mass, find the ghost
+//!    faces (G 4.2);
+//! 2. assemble the mass ([`MassKind`]): lumped `M_bar = diag(sum_p m_p S_vp)`,
+//!    consistent `M = sum_p m_p S_p^T S_p`, or stabilised
+//!    `M_tilde = M + gamma_M J_G` (G (20)); factorise the consistent ones
+//!    (sparse Cholesky, pattern and symbolic analysis reused while the
+//!    point groups and faces are unchanged);
+//! 3. map momentum: `M v_n = sum_p m_p S_p^T v_p` (G (10));
+//! 4. USF: update stresses from `dF = I + dt grad v_n`;
+//! 5. `f_int = sum_p V0_p P_p grad S` (`P = tau dF^-T`), `f_ext` (gravity,
+//!    point loads, tractions); `M a = f_ext - f_int`;
+//!    `v_{n+1} = v_n + dt a` (supported components stay at rest);
+//! 6. points: FLIP `v_p += dt sum_v S_vp a_v` or PIC `v_p = sum_v S_vp v_v`;
+//!    `x_p += dt sum_v S_vp v_v`;
+//! 7. USL: update stresses from `dF = I + dt grad v_{n+1}`;
+//! 8. energies (kinetic, strain, plastic dissipation, work of the loads) and
+//!    their balance against the initial energy; a step whose grid velocities
+//!    or energy explode is a [`StepFailure::Diverged`], non-finite values a
+//!    [`StepFailure::NonFinite`]: the state stays at the last good step.
+
+use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::geometry::P2;
+use crate::ghost::{self, GhostFace};
+use crate::linalg::{self, Condition, ConditionMethod, Factor};
+use crate::material::hencky::{right_stretch, Response};
+use crate::newton::{be_matrix, increment_gradient};
+use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
+use crate::simulation::{Energy, Simulation, StepFailure, StepReport, Timings};
+use faer::sparse::linalg::solvers::SymbolicLlt;
+use faer::sparse::SparseColMat;
+use nalgebra::Matrix2;
+use std::time::Instant;
+
+/// What an explicit step adds to its [`StepReport`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DynamicsReport {
+    /// Time at the end of the step (s).
+    pub time: f64,
+    /// Time step (s).
+    pub dt: f64,
+    /// `W_0`: kinetic plus strain energy at `t = 0` (J per unit thickness).
+    pub initial_energy: f64,
+    /// Energy balance `W_kin + W_eps + W_p - W_ext - W_0` (J); G 5.2 charts
+    /// `W_kin + W_eps - W_0` for elastic bodies without loads.
+    pub energy_error: f64,
+    /// `sum_p m_p v_p` after the step (kg m/s per unit thickness).
+    pub momentum: P2,
+    /// Largest grid speed `|v_{n+1}|` of the step (m/s).
+    pub max_speed: f64,
+    pub mass: MassKind,
+    pub stress_update: StressUpdate,
+    pub velocity_update: VelocityUpdate,
+    /// Whether the mass pattern and its symbolic factorisation were reused
+    /// from the previous step.
+    pub pattern_reused: bool,
+    /// Mass conditioning and CFL numbers, every `condition_every` steps.
+    pub conditioning: Option<Conditioning>,
+}
+
+/// Condition numbers of the three mass matrices at one configuration, and
+/// the CFL numbers `C = 1 / (h sqrt(lambda_max(K, M)))` (s/m; G 3.5) with
+/// each. A matrix that is not numerically positive definite has condition
+/// `inf` and CFL number 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Conditioning {
+    /// `M` (G (9)), reduced to the free dofs.
+    pub mass_consistent: Condition,
+    /// `M + gamma_M J_G` (G (20)).
+    pub mass_stabilised: Condition,
+    /// `diag(sum_p m_p S_vp)`: exact (largest over smallest entry).
+    pub mass_lumped: Condition,
+    /// With `K` (the material tangent) and `M`; `None` when `K = 0`.
+    pub cfl_consistent: Option<f64>,
+    /// With `K + gamma_K J_G` and `M + gamma_M J_G`.
+    pub cfl_stabilised: Option<f64>,
+    /// With `K` and the lumped mass.
+    pub cfl_lumped: Option<f64>,
+    /// The reduced material tangent `K` and `K + gamma_K J_G` (on demand
+    /// only, [`Simulation::conditioning`]; singular without supports).
+    pub stiffness: Option<Condition>,
+    pub stiffness_stabilised: Option<Condition>,
+}
+
+/// The mass pattern and symbolic Cholesky of the last step, reused while
+/// the assembly blocks (point groups and ghost faces) stay the same.
+#[derive(Default)]
+pub(crate) struct MassCache {
+    key: Vec<Vec<usize>>,
+    pattern: Option<(Pattern, SymbolicLlt<usize>)>,
+}
+
+/// A factorised mass matrix on the free dofs.
+enum MassSolver {
+    Lumped(Vec<f64>),
+    Consistent(Factor),
+}
+
+impl MassSolver {
+    fn solve(&self, b: &[f64]) -> Vec<f64> {
+        match self {
+            MassSolver::Lumped(d) => b.iter().zip(d).map(|(b, d)| b / d).collect(),
+            MassSolver::Consistent(f) => linalg::solve(f, b),
+        }
+    }
+}
+
+/// Row-major `2m x 2m` mass block of a point group: `sum_p m_p S_a S_b I_2`.
+fn group_mass(map: &Mapping, b: usize, masses: &[f64], out: &mut Vec<f64>) {
+    let g = &map.groups[b];
+    let m2 = 2 * g.nodes.len();
+    out.clear();
+    out.resize(m2 * m2, 0.0);
+    for &p in &g.points {
+        let s = &map.stencils[p];
+        for a in 0..s.len {
+            for c in 0..s.len {
+                let v = masses[p] * s.w[a] * s.w[c];
+                out[2 * a * m2 + 2 * c] += v;
+                out[(2 * a + 1) * m2 + 2 * c + 1] += v;
+            }
+        }
+    }
+}
+
+/// Assembly blocks: point groups, then ghost faces.
+fn blocks<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
+    crate::newton::blocks_of(map, faces)
+}
+
+/// The reduced consistent mass plus `gamma_m J_G` (lower triangle).
+fn consistent_mass(
+    map: &Mapping,
+    pattern: &Pattern,
+    blocks: &[&[usize]],
+    faces: &[GhostFace],
+    masses: &[f64],
+    gamma_m: f64,
+) -> SparseColMat<usize, f64> {
+    let ng = map.groups.len();
+    pattern
+        .assemble_with(&map.dofs, blocks, |b, out| {
+            if b < ng {
+                group_mass(map, b, masses, out)
+            } else {
+                faces[b - ng].stiffness(gamma_m, out)
+            }
+        })
+        .0
+}
+
+/// The lumped mass on the free dofs.
+fn lumped_mass(map: &Mapping, masses: &[f64]) -> Vec<f64> {
+    let mut d = vec![0.0; map.dofs.n_free];
+    for (p, s) in map.stencils.iter().enumerate() {
+        for (n, w, _) in s.iter() {
+            for c in 0..2 {
+                if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                    d[i] += masses[p] * w;
+                }
+            }
+        }
+    }
+    d
+}
+
+/// Grid values on the free dofs from per-node pairs, and back.
+fn gather(map: &Mapping, nodal: &[P2]) -> Vec<f64> {
+    let mut v = vec![0.0; map.dofs.n_free];
+    for (n, d) in map.dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                v[i] = nodal[n][c];
+            }
+        }
+    }
+    v
+}
+
+fn scatter(map: &Mapping, free: &[f64]) -> Vec<P2> {
+    let mut nodal = vec![[0.0; 2]; map.dofs.node_dof.len()];
+    for (n, d) in map.dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                nodal[n][c] = free[i];
+            }
+        }
+    }
+    nodal
+}
+
+/// Material responses to the nodal increments `du` (m) and the internal
+/// force `sum_p V0_p P_p grad S` on the free dofs.
+/// Per point (none for zero-volume points): `dF` and the material's response.
+type Responses = Vec<Option<(Matrix2<f64>, Response)>>;
+
+fn respond(sim: &Simulation, map: &Mapping, du: &[P2]) -> (Responses, Vec<f64>) {
+    let pts = &sim.state.points;
+    let mut fint = vec![0.0; map.dofs.n_free];
+    let mut out = Vec::with_capacity(pts.len());
+    for p in 0..pts.len() {
+        if pts.vol0[p] == 0.0 {
+            out.push(None);
+            continue;
+        }
+        let st = &map.stencils[p];
+        let df = increment_gradient(st, du);
+        let r = sim.hencky(p).respond_stress(&df, &be_matrix(pts.b_e[p]));
+        for (n, _, g) in st.iter() {
+            for i in 0..2 {
+                if let Dof::Free(k) = map.dofs.node_dof[n][i] {
+                    fint[k] += (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * pts.vol0[p];
+                }
+            }
+        }
+        out.push(Some((df, r)));
+    }
+    (out, fint)
+}
+
+fn non_finite(step: usize, what: &str) -> StepFailure {
+    StepFailure::NonFinite {
+        step,
+        what: what.into(),
+        residuals: Vec::new(),
+    }
+}
+
+/// Factorise the mass of this step (reusing the cached pattern when the
+/// blocks are unchanged). Returns the solver and whether the cache was hit.
+fn factorise_mass(
+    sim: &mut Simulation,
+    map: &Mapping,
+    faces: &[GhostFace],
+    kind: MassKind,
+    step: usize,
+) -> Result<(MassSolver, bool), StepFailure> {
+    let masses = &sim.state.points.mass;
+    if kind == MassKind::Lumped {
+        let d = lumped_mass(map, masses);
+        return Ok((MassSolver::Lumped(d), false));
+    }
+    let blocks = blocks(map, faces);
+    let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
+    let reused = sim.mass_cache.pattern.is_some() && sim.mass_cache.key == key;
+    if !reused {
+        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+        // The symbolic analysis needs values only for the structure.
+        let m = consistent_mass(map, &pattern, &blocks, faces, masses, 1.0);
+        let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| StepFailure::Singular {
+            step,
+            reason: format!("mass matrix: {e}"),
+        })?;
+        sim.mass_cache = MassCache {
+            key,
+            pattern: Some((pattern, symbolic)),
+        };
+    }
+    let (pattern, symbolic) = sim.mass_cache.pattern.as_ref().expect("set above");
+    let gamma = if kind == MassKind::Stabilised {
+        sim.params.gamma_m
+    } else {
+        0.0
+    };
+    let m = consistent_mass(map, pattern, &blocks, faces, &sim.state.points.mass, gamma);
+    let factor = linalg::cholesky_with(symbolic, &m).map_err(|e| StepFailure::Singular {
+        step,
+        reason: format!(
+            "the {} mass matrix cannot be factorised: {e}{}",
+            if kind == MassKind::Stabilised {
+                "stabilised"
+            } else {
+                "consistent"
+            },
+            if kind == MassKind::Consistent {
+                " (nodes barely touched by points; use mass = \"stabilised\" or \"lumped\")"
+            } else {
+                ""
+            }
+        ),
+    })?;
+    Ok((MassSolver::Consistent(factor), reused))
+}
+
+pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
+    let step = sim.state.step + 1;
+    let steps = sim.load_steps();
+    let a = sim.model.analysis.clone();
+    let dt = a.duration.unwrap_or(0.0) / steps as f64;
+    let start = Instant::now();
+    let mut timings = Timings::default();
+    let h = sim.model.grid.h;
+
+    // 1. Map points; ghost faces for the stabilised mass.
+    let map = Mapping::build(
+        &sim.model.grid,
+        &sim.state.points,
+        &sim.model.bodies,
+        &sim.model.dirichlet,
+        0.0,
+    );
+    let stabilised = a.mass == MassKind::Stabilised && sim.params.gamma_m > 0.0;
+    let faces = if stabilised {
+        ghost::faces_of(&sim.model.grid, &map)
+    } else {
+        Vec::new()
+    };
+    let kind = if a.mass == MassKind::Stabilised && !stabilised {
+        MassKind::Consistent
+    } else {
+        a.mass
+    };
+
+    // 2. Mass.
+    let t = Instant::now();
+    let (mass, pattern_reused) = factorise_mass(sim, &map, &faces, kind, step)?;
+    timings.factorisation = t.elapsed().as_secs_f64();
+
+    // 3. Momentum to grid velocities.
+    let t = Instant::now();
+    let pts = &sim.state.points;
+    let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
+    for p in 0..pts.len() {
+        for (n, w, _) in map.stencils[p].iter() {
+            momentum[n][0] += w * pts.mass[p] * pts.v[p][0];
+            momentum[n][1] += w * pts.mass[p] * pts.v[p][1];
+        }
+    }
+    let v0 = mass.solve(&gather(&map, &momentum));
+    if v0.iter().any(|v| !v.is_finite()) {
+        return Err(non_finite(step, "grid velocity from the momentum"));
+    }
+    let v0n = scatter(&map, &v0);
+    timings.solve += t.elapsed().as_secs_f64();
+
+    // 4-5. Stress (USF) and forces, accelerations.
+    let t = Instant::now();
+    let du0: Vec<P2> = v0n.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
+    let zero = vec![[0.0; 2]; du0.len()];
+    let (first, fint) = respond(
+        sim,
+        &map,
+        if a.stress_update == StressUpdate::Usf {
+            &du0
+        } else {
+            &zero
+        },
+    );
+    let (forces, boundaries) = sim.nodal_forces(&map, step, 1.0)?;
+    let rhs: Vec<f64> = forces.ext.iter().zip(&fint).map(|(e, i)| e - i).collect();
+    timings.assembly += t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let acc = mass.solve(&rhs);
+    let v1: Vec<f64> = v0.iter().zip(&acc).map(|(v, a)| v + dt * a).collect();
+    timings.solve += t.elapsed().as_secs_f64();
+    if acc.iter().chain(&v1).any(|v| !v.is_finite()) {
+        return Err(non_finite(step, "grid acceleration"));
+    }
+    let (an, v1n) = (scatter(&map, &acc), scatter(&map, &v1));
+    // Nodes that points barely touch may take large velocities without
+    // moving anything; the points' own increments are what must stay small.
+    let max_speed = v1n.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f64::max);
+
+    // 6-7. Points: velocities, positions, then (USL) stresses.
+    let t = Instant::now();
+    let du1: Vec<P2> = v1n.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
+    let responses = if a.stress_update == StressUpdate::Usl {
+        respond(sim, &map, &du1).0
+    } else {
+        first
+    };
+    let mut pts = sim.state.points.clone();
+    let (mut strain, mut dissipation) = (0.0, 0.0);
+    let mut fastest = (0.0f64, 0);
+    // Largest |dF - I| (Frobenius) of the step, and where.
+    let mut strained = (0.0f64, 0);
+    for p in 0..pts.len() {
+        let st = &map.stencils[p];
+        let dx = st.interpolate(|n| du1[n]);
+        if dx[0].hypot(dx[1]) > fastest.0 {
+            fastest = (dx[0].hypot(dx[1]), p);
+        }
+        pts.x[p] = [pts.x[p][0] + dx[0], pts.x[p][1] + dx[1]];
+        pts.v[p] = match a.velocity_update {
+            VelocityUpdate::Flip => {
+                let dv = st.interpolate(|n| an[n]);
+                [pts.v[p][0] + dt * dv[0], pts.v[p][1] + dt * dv[1]]
+            }
+            VelocityUpdate::Pic => st.interpolate(|n| v1n[n]),
+        };
+        let Some((df, r)) = &responses[p] else { continue };
+        let stretch = (df - Matrix2::identity()).norm();
+        if !(stretch <= strained.0) {
+            strained = (stretch, p);
+        }
+        let fo = pts.def_grad[p];
+        let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
+        pts.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
+        pts.vol[p] *= df.determinant();
+        let u = right_stretch(&f);
+        pts.lp[p] = [pts.lp0[p][0] * u[(0, 0)], pts.lp0[p][1] * u[(1, 1)]];
+        let s = r.tau / f.determinant();
+        pts.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
+        pts.szz[p] = s[(2, 2)];
+        pts.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
+        pts.dissipation[p] += r.dissipation * pts.vol0[p];
+        pts.yielding[p] = r.yielding;
+        dissipation += pts.dissipation[p];
+        strain += pts.vol0[p] * sim.hencky(p).stored_energy(&r.b_e);
+    }
+    if let Some(p) = (0..pts.len()).find(|&p| !(pts.v[p][0].is_finite() && pts.v[p][1].is_finite())) {
+        return Err(non_finite(step, &format!("velocity at point {p}")));
+    }
+    if fastest.0 > h {
+        return Err(StepFailure::Diverged {
+            step,
+            reason: format!(
+                "point {} would move {:.3e} m in one step, more than a cell (h = {h}, dt = {dt:.3e} s, largest grid speed {max_speed:.3e} m/s): the time step is too large or the {} mass is ill-conditioned",
+                fastest.1,
+                fastest.0,
+                mass_name(kind)
+            ),
+        });
+    }
+    // Explicit steps are small: a point whose deformation gradient changes by
+    // more than half in one step (or to a non-finite value) has diverged.
+    if !(strained.0 <= 0.5) {
+        return Err(StepFailure::Diverged {
+            step,
+            reason: format!(
+                "point {} would deform by |dF - I| = {:.3e} in one step (dt = {dt:.3e} s, largest grid speed {max_speed:.3e} m/s): the time step is too large or the {} mass is ill-conditioned",
+                strained.1,
+                strained.0,
+                mass_name(kind)
+            ),
+        });
+    }
+    crate::simulation::check_points(&sim.model.grid, &pts, step, &[])?;
+    // A GIMP domain reaching past the grid's edge loses nodes of its basis,
+    // and with them partition of unity and momentum conservation.
+    let grid = &sim.model.grid;
+    let (lo, hi) = (grid.origin, grid.max());
+    let tol = 1e-9 * h;
+    for p in 0..pts.len() {
+        if sim.model.bodies[pts.body[p]].basis != crate::basis::BasisKind::Gimp {
+            continue;
+        }
+        let (x, l) = (pts.x[p], pts.lp[p]);
+        let corner = [0, 1].map(|d| {
+            if x[d] - l[d] < lo[d] - tol {
+                x[d] - l[d]
+            } else if x[d] + l[d] > hi[d] + tol {
+                x[d] + l[d]
+            } else {
+                x[d]
+            }
+        });
+        if corner != x {
+            return Err(StepFailure::LeftGrid {
+                step,
+                point: p,
+                position: corner,
+                domain: true,
+            });
+        }
+    }
+    timings.update = t.elapsed().as_secs_f64();
+
+    // 8. Energies and the balance.
+    let work: f64 = forces.ext.iter().zip(&v1).map(|(f, v)| f * dt * v).sum();
+    let kinetic = pts.kinetic_energy();
+    let external_work = sim.state.external_work + work;
+    let w0 = sim.state.initial_energy;
+    let energy_error = kinetic + strain + dissipation - external_work - w0;
+    let scale = w0 + external_work.abs() + dissipation;
+    if scale > 0.0 && kinetic + strain > a.blowup_factor * scale {
+        return Err(StepFailure::Diverged {
+            step,
+            reason: format!(
+                "kinetic + strain energy {:.3e} J exceeds {} x (initial energy + work + dissipation) = {:.3e} J with the {} mass",
+                kinetic + strain,
+                a.blowup_factor,
+                a.blowup_factor * scale,
+                mass_name(kind)
+            ),
+        });
+    }
+
+    // Conditioning of this step's mass matrices, when asked.
+    let t = Instant::now();
+    let every = a.condition_every;
+    let conditioning = (sim.params.condition != ConditionMode::Off && every > 0 && (step % every == 0 || step == 1))
+        .then(|| {
+            let faces = if faces.is_empty() {
+                ghost::faces_of(&sim.model.grid, &map)
+            } else {
+                faces.clone()
+            };
+            conditioning_on(sim, &map, &faces)
+        });
+    timings.condition = t.elapsed().as_secs_f64();
+    let (condition, condition_unstabilised) = match &conditioning {
+        None => (None, None),
+        Some(c) => match kind {
+            MassKind::Stabilised => (Some(c.mass_stabilised), Some(c.mass_consistent)),
+            MassKind::Consistent => (Some(c.mass_consistent), None),
+            MassKind::Lumped => (Some(c.mass_lumped), None),
+        },
+    };
+
+    let momentum = pts.momentum();
+    sim.commit(pts, step, work, &map, &faces, 0);
+    let lambda = step as f64 / steps as f64;
+    let errors = match &sim.model.exact {
+        Some(e) => e.errors(&sim.state.points, lambda),
+        None => Vec::new(),
+    };
+    timings.total = start.elapsed().as_secs_f64();
+    Ok(StepReport {
+        step,
+        load_steps: steps,
+        load_factor: lambda,
+        unknowns: map.dofs.n_free,
+        active_nodes: map.dofs.active_nodes,
+        active_cells: map.active_cells.len(),
+        residual_norm: norm(&rhs),
+        residuals: Vec::new(),
+        timings,
+        energy: Energy {
+            strain,
+            external_work,
+            plastic_dissipation: dissipation,
+            kinetic,
+        },
+        condition,
+        condition_unstabilised,
+        iterations: 0,
+        ghost_faces: faces.len(),
+        ibm: Vec::new(),
+        errors,
+        max_increment: max_speed * dt,
+        boundaries,
+        dynamics: Some(DynamicsReport {
+            time: step as f64 * dt,
+            dt,
+            initial_energy: w0,
+            energy_error,
+            momentum,
+            max_speed,
+            mass: kind,
+            stress_update: a.stress_update,
+            velocity_update: a.velocity_update,
+            pattern_reused,
+            conditioning,
+        }),
+    })
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+fn mass_name(kind: MassKind) -> &'static str {
+    match kind {
+        MassKind::Lumped => "lumped",
+        MassKind::Consistent => "consistent",
+        MassKind::Stabilised => "stabilised",
+    }
+}
+
+/// Condition number of an SPD matrix, or `inf` when it cannot be factorised.
+fn spd_condition(m: &SparseColMat<usize, f64>, mode: ConditionMode, dense_limit: usize) -> (Condition, Option<Factor>) {
+    match linalg::cholesky(m) {
+        Ok(f) => {
+            let limit = match mode {
+                ConditionMode::Dense => usize::MAX,
+                ConditionMode::Lanczos => 0,
+                _ => dense_limit,
+            };
+            (linalg::condition(m, &f, limit), Some(f))
+        }
+        // Not numerically positive definite: its smallest eigenvalue is at
+        // or below round-off of the largest; dense eigenvalues say where.
+        Err(_) => {
+            let ev = (m.nrows() <= dense_limit)
+                .then(|| linalg::dense_eigenvalues(m))
+                .flatten();
+            let (lo, hi) = ev.map_or((0.0, f64::NAN), |e| (e[0], e[e.len() - 1]));
+            (
+                Condition {
+                    value: f64::INFINITY,
+                    lambda_min: lo,
+                    lambda_max: hi,
+                    method: ConditionMethod::NotPositiveDefinite,
+                },
+                None,
+            )
+        }
+    }
+}
+
+/// Largest eigenvalue of `K x = lambda M x` by power iteration on `M^-1 K`
+/// with the Rayleigh quotient `x.Kx / x.Mx`, from a fixed pseudo-random
+/// start; stops when it settles to 1e-8 relative (at most 2000 iterations).
+/// `K` is stored in full, `M` applied through `m_mul` and `m_solve`.
+fn generalised_lambda_max(
+    k: &SparseColMat<usize, f64>,
+    m_mul: impl Fn(&[f64]) -> Vec<f64>,
+    m_solve: impl Fn(&[f64]) -> Vec<f64>,
+) -> f64 {
+    let n = k.nrows();
+    let k_mul = |x: &[f64]| {
+        let mut y = vec![0.0; n];
+        let (cp, ri, v) = (k.col_ptr(), k.row_idx(), k.val());
+        for c in 0..n {
+            for i in cp[c]..cp[c + 1] {
+                y[ri[i]] += v[i] * x[c];
+            }
+        }
+        y
+    };
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut x: Vec<f64> = (0..n)
+        .map(|_| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        })
+        .collect();
+    let mut last = 0.0;
+    for _ in 0..2000 {
+        let kx = k_mul(&x);
+        let mx = m_mul(&x);
+        let (xkx, xmx) = (dot(&x, &kx), dot(&x, &mx));
+        if !(xmx > 0.0) || !xkx.is_finite() {
+            return f64::INFINITY;
+        }
+        let lambda = xkx / xmx;
+        if lambda <= 0.0 && norm(&kx) == 0.0 {
+            return 0.0;
+        }
+        if (lambda - last).abs() <= 1e-8 * lambda.abs() {
+            return lambda;
+        }
+        last = lambda;
+        let z = m_solve(&kx);
+        let nz = norm(&z);
+        if !(nz > 0.0 && nz.is_finite()) {
+            return lambda;
+        }
+        x = z.iter().map(|v| v / nz).collect();
+    }
+    last
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn cfl(h: f64, lambda_max: f64) -> Option<f64> {
+    if lambda_max == 0.0 {
+        None
+    } else if !lambda_max.is_finite() {
+        Some(0.0)
+    } else {
+        Some(1.0 / (h * lambda_max.sqrt()))
+    }
+}
+
+/// Mass conditioning and CFL numbers for a mapping and its ghost faces.
+fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Conditioning {
+    let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
+    let masses = &sim.state.points.mass;
+    let blocks = blocks(map, faces);
+    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let mc = consistent_mass(map, &pattern, &blocks, faces, masses, 0.0);
+    let ms = consistent_mass(map, &pattern, &blocks, faces, masses, sim.params.gamma_m);
+    let (cond_c, fact_c) = spd_condition(&mc, mode, limit);
+    let (cond_s, fact_s) = spd_condition(&ms, mode, limit);
+    let lumped = lumped_mass(map, masses);
+    let (lo, hi) = lumped
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), &d| (lo.min(d), hi.max(d)));
+    let cond_l = Condition {
+        value: if lo > 0.0 { hi / lo } else { f64::INFINITY },
+        lambda_min: lo,
+        lambda_max: hi,
+        method: ConditionMethod::Dense,
+    };
+    // Stiffness: the material tangent at the current state, with and
+    // without the ghost term.
+    let full = Pattern::new(&map.dofs, &blocks, Storage::Full);
+    let zero = vec![[0.0; 2]; map.dofs.node_dof.len()];
+    let it = crate::newton::evaluate(sim, map, &zero);
+    let k = crate::newton::tangent(sim, map, &full, &blocks, faces, &it, 0.0);
+    let ks = crate::newton::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k);
+    let h = sim.model.grid.h;
+    let with = |k: &SparseColMat<usize, f64>, m: &SparseColMat<usize, f64>, f: &Option<Factor>| match f {
+        Some(f) => cfl(
+            h,
+            generalised_lambda_max(k, |x| linalg::sym_lower_mul(m, x), |b| linalg::solve(f, b)),
+        ),
+        None => Some(0.0),
+    };
+    Conditioning {
+        mass_consistent: cond_c,
+        mass_stabilised: cond_s,
+        mass_lumped: cond_l,
+        cfl_consistent: with(&k, &mc, &fact_c),
+        cfl_stabilised: with(&ks, &ms, &fact_s),
+        cfl_lumped: if lo > 0.0 {
+            cfl(
+                h,
+                generalised_lambda_max(
+                    &k,
+                    |x| x.iter().zip(&lumped).map(|(x, d)| x * d).collect(),
+                    |b| b.iter().zip(&lumped).map(|(b, d)| b / d).collect(),
+                ),
+            )
+        } else {
+            Some(0.0)
+        },
+        stiffness: None,
+        stiffness_stabilised: None,
+    }
+}
+
+impl Simulation {
+    /// Simulated time (s) after the steps taken, for explicit dynamics.
+    pub fn time(&self) -> Option<f64> {
+        let a = &self.model.analysis;
+        (a.kind == crate::scene::AnalysisKind::ExplicitDynamics)
+            .then(|| self.state.step as f64 * a.duration.unwrap_or(0.0) / a.load_steps as f64)
+    }
+
+    /// Mass conditioning and CFL numbers at the current configuration, on
+    /// demand (any analysis): the consistent, stabilised (`gamma_M` of the
+    /// parameters) and lumped masses, over the dofs the scene's supports
+    /// leave free.
+    pub fn conditioning(&self) -> Conditioning {
+        let model = &self.model;
+        let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
+        let faces = ghost::faces_of(&model.grid, &map);
+        let mut c = conditioning_on(self, &map, &faces);
+        let blocks = blocks(&map, &faces);
+        let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+        let it = crate::newton::evaluate(self, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()]);
+        let (mode, limit) = (self.params.condition, self.params.dense_limit);
+        let k = |gamma: f64| crate::newton::tangent(self, &map, &lower, &blocks, &faces, &it, gamma);
+        c.stiffness = Some(spd_condition(&k(0.0), mode, limit).0);
+        c.stiffness_stabilised = Some(spd_condition(&k(self.params.gamma_k), mode, limit).0);
+        c
+    }
+
+    /// Grid velocities from mapping the point momenta with the stabilised
+    /// (`gamma_M` of the parameters), consistent or lumped mass (G (10)),
+    /// per active node (m/s); `Err` when the mass cannot be factorised.
+    pub fn map_velocities(&self, kind: MassKind) -> Result<Vec<(usize, P2)>, String> {
+        let model = &self.model;
+        let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
+        let pts = &self.state.points;
+        let faces = if kind == MassKind::Stabilised {
+            ghost::faces_of(&model.grid, &map)
+        } else {
+            Vec::new()
+        };
+        let solver = if kind == MassKind::Lumped {
+            MassSolver::Lumped(lumped_mass(&map, &pts.mass))
+        } else {
+            let blocks = blocks(&map, &faces);
+            let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+            let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, self.params.gamma_m);
+            MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?)
+        };
+        let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
+        for p in 0..pts.len() {
+            for (n, w, _) in map.stencils[p].iter() {
+                momentum[n][0] += w * pts.mass[p] * pts.v[p][0];
+                momentum[n][1] += w * pts.mass[p] * pts.v[p][1];
+            }
+        }
+        let v = scatter(&map, &solver.solve(&gather(&map, &momentum)));
+        Ok((0..v.len())
+            .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
+            .map(|n| (n, v[n]))
+            .collect())
+    }
+}

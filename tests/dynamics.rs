@@ -1,0 +1,299 @@
+//! Explicit dynamics against G section 5.1-5.3 and G 2.6/3.5: exact paths
+//! of free motion, mass conditioning, energy balance, momentum.
+
+mod common;
+use common::{error, sim_with};
+use mpmlab::scene::{MassKind, RegionSpec, StressUpdate, VelocityUpdate};
+use mpmlab::simulation::StepFailure;
+use mpmlab::Simulation;
+
+/// Every step's report of a run to the end (panics on failure).
+fn run(sim: &mut Simulation) -> Vec<mpmlab::StepReport> {
+    let mut out = Vec::new();
+    while !sim.finished() {
+        out.push(sim.step().unwrap_or_else(|f| panic!("{f}")));
+    }
+    out
+}
+
+#[test]
+fn ghost_region_has_the_papers_area() {
+    // G 5.2: W0 = 2.14726 J for two ghosts of rho = 1000 kg/m^3 at
+    // |v| = 0.1 sqrt(2) m/s, i.e. 0.107363 m^2 each. The outline is chosen
+    // for that area with exact arcs; the flattened arcs lose less than 1e-3.
+    let r = RegionSpec::Ghost {
+        min: [0.3, 0.3],
+        size: 0.4,
+    }
+    .build("region")
+    .unwrap();
+    let area = r.area();
+    assert!((area / 0.107363 - 1.0).abs() < 1e-3, "{area}");
+    // Eye holes: the eye centres are outside the region, the head inside.
+    assert!(!r.contains([0.3 + 0.4 * 0.32, 0.3 + 0.4 * 0.6]));
+    assert!(r.contains([0.5, 0.3 + 0.4 * 0.9]));
+}
+
+#[test]
+fn stretching_ghost_follows_the_exact_path() {
+    // G 5.1.2: with the Ghost-stabilised consistent mass the linear velocity
+    // field is in the grid's span and is mapped exactly (J_G does not
+    // penalise linear fields), so FLIP and PIC both keep every point on its
+    // exact path. G: error < 1e-13 m. Our bound 1e-12 m allows round-off
+    // accumulated over 1000 steps with cond(M~) ~ 1e2.
+    for update in [VelocityUpdate::Flip, VelocityUpdate::Pic] {
+        let mut sim = sim_with("stretching-ghost", |s| {
+            s.analysis.velocity_update = update;
+            s.analysis.condition_every = 0;
+        });
+        let reports = run(&mut sim);
+        assert_eq!(reports.len(), 1000);
+        let worst = reports.iter().map(|r| error(r, "displacement_max")).fold(0.0, f64::max);
+        assert!(worst < 1e-12, "{update:?}: {worst:e}");
+        // F = (1 + t) I: the volume has grown by (1 + 1)^2.
+        let pts = sim.points();
+        for p in 0..pts.len() {
+            assert!((pts.vol[p] / pts.vol0[p] - 4.0).abs() < 1e-9);
+        }
+    }
+    // Lumped FLIP: the nodal velocities of a non-uniform field are wrong,
+    // so positions drift (G Fig. 11c: up to 3e-2 m).
+    let mut sim = sim_with("stretching-ghost", |s| {
+        s.analysis.mass = MassKind::Lumped;
+        s.analysis.condition_every = 0;
+    });
+    let last = run(&mut sim).pop().unwrap();
+    let e = error(&last, "displacement_max");
+    assert!(e > 1e-4 && e < 1e-1, "{e}");
+}
+
+#[test]
+fn unstabilised_consistent_mass_fails_cleanly() {
+    // G 5.1.2: "not possible to use the non-stabilised consistent mass
+    // matrix ... diverging after 21 time steps". It must end in a reported
+    // failure, with the state left at the last good step and no NaNs.
+    let mut sim = sim_with("stretching-ghost", |s| {
+        s.analysis.mass = MassKind::Consistent;
+        s.analysis.condition_every = 0;
+    });
+    let failure = loop {
+        match sim.step() {
+            Ok(_) => assert!(sim.step_index() < 1000, "it should not complete"),
+            Err(f) => break f,
+        }
+    };
+    assert!(
+        matches!(failure, StepFailure::Diverged { .. } | StepFailure::Singular { .. }),
+        "{failure}"
+    );
+    assert_eq!(sim.step_index() + 1, failure.step());
+    let pts = sim.points();
+    assert!((0..pts.len()).all(|p| pts.x[p].iter().chain(&pts.v[p]).all(|v| v.is_finite())));
+    // Stepping again fails again rather than running on.
+    assert!(sim.step().is_err());
+}
+
+#[test]
+fn translating_ghost_conditioning_and_velocity_mapping() {
+    // G 5.1.1 / Table 2 (coarse ghost, h = 0.0312 m, gamma_M = rho/4):
+    // stabilised max 4.3e5, unstabilised 1.9e41, lumped 1.7e10. Every 10th
+    // of the 1000 positions is checked.
+    let mut sim = sim_with("translating-ghost", |s| s.analysis.condition_every = 10);
+    let (mut stab, mut cons, mut lump) = (0.0f64, 0.0f64, 0.0f64);
+    let mut worst_velocity = 0.0f64;
+    while !sim.finished() {
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        if let Some(c) = r.dynamics.as_ref().unwrap().conditioning {
+            stab = stab.max(c.mass_stabilised.value);
+            cons = cons.max(c.mass_consistent.value);
+            lump = lump.max(c.mass_lumped.value);
+            // The points move at (1, 1) m/s: the stabilised consistent mass
+            // maps that constant field to (1, 1) at every active node (G:
+            // max error 3.3e-13; round-off with cond ~1e2 allows 1e-12).
+            for (_, v) in sim.map_velocities(MassKind::Stabilised).unwrap() {
+                worst_velocity = worst_velocity.max((v[0] - 1.0).abs()).max((v[1] - 1.0).abs());
+            }
+        }
+    }
+    println!("max cond: stabilised {stab:.3e}, consistent {cons:.3e}, lumped {lump:.3e}; velocity error {worst_velocity:.2e}");
+    // Stabilised: bounded (G: ~4e5; ours ~3e2, see docs/verification.md).
+    assert!(stab < 1e6, "{stab:e}");
+    // Unstabilised: beyond 1e20 at some positions. Most positions are
+    // singular to working precision (the Cholesky breaks down with the
+    // smallest eigenvalue at -1e-16 of the largest), reported as infinite.
+    assert!(cons > 1e20, "{cons:e}");
+    // Lumped: many orders above the stabilised one (G: 1e10-1e11).
+    assert!(lump > 1e3 * stab, "{lump:e}");
+    assert!(worst_velocity < 1e-12, "{worst_velocity:e}");
+    // The rigid translation itself is exact with the stabilised mass.
+    let r = sim.points();
+    for p in 0..r.len() {
+        let u = r.displacement(p);
+        assert!((u[0] - 0.5).abs() < 1e-12 && (u[1] - 0.5).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn translating_domain_mass_conditioning() {
+    // G 2.6 / 3.5, Table 1 and Figs. 6-7: 8 points translated a/h = 0..2.
+    // Without ghost the consistent mass spikes by many orders whenever a
+    // point (sMPM) or a GIMP domain barely enters a cell; with gamma_M =
+    // rho/4 (and gamma_K = 1 for the CFL number) it stays near 1e1-1e2 and
+    // the CFL number hardly depends on the position.
+    println!("| basis | a/h | cond M | cond M~ | cond M lumped | cond K | cond K~ | CFL M | CFL M~ |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for basis in [mpmlab::basis::BasisKind::Standard, mpmlab::basis::BasisKind::Gimp] {
+        // sMPM: a point exactly on a grid line gives a node of zero weight
+        // (a degenerate, exactly singular matrix); sample around those
+        // positions instead (the lattice's points lie on lines at a/h =
+        // 0.25 mod 0.5). GIMP: positions just past a grid line, where a
+        // domain barely enters a new cell.
+        let mut positions: Vec<f64> = (0..=200)
+            .map(|k| k as f64 / 100.0)
+            .filter(|a| basis == mpmlab::basis::BasisKind::Gimp || (a * 4.0).fract() != 0.0 || (a * 2.0).fract() == 0.0)
+            .collect();
+        positions.extend([1e-3, 1e-5, 1e-7, 1.0 + 1e-3, 1.0 + 1e-5, 1.0 + 1e-7]);
+        positions.extend([0.25 + 1e-3, 0.25 + 1e-5, 0.25 + 1e-7, 1.25 + 1e-7]);
+        let (mut worst, mut best) = ([0.0f64; 3], [f64::INFINITY; 3]);
+        let (mut cfl_s, mut cfl_c) = ((f64::INFINITY, 0.0f64), (f64::INFINITY, 0.0f64));
+        for (k, &a) in positions.iter().enumerate() {
+            let sim = sim_with("translating-domain", |s| {
+                s.bodies[0].basis = basis;
+                s.bodies[0].region = RegionSpec::Rectangle {
+                    min: [a, 0.0],
+                    max: [2.0 + a, 1.0],
+                };
+            });
+            let c = sim.conditioning();
+            let v = [c.mass_consistent.value, c.mass_stabilised.value, c.mass_lumped.value];
+            for i in 0..3 {
+                worst[i] = worst[i].max(v[i]);
+                best[i] = best[i].min(v[i]);
+            }
+            let (s, u) = (c.cfl_stabilised.unwrap(), c.cfl_consistent.unwrap());
+            cfl_s = (cfl_s.0.min(s), cfl_s.1.max(s));
+            cfl_c = (cfl_c.0.min(u), cfl_c.1.max(u));
+            if k % 25 == 0 || k + 10 > positions.len() {
+                println!(
+                    "| {basis:?} | {a} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {u:.3e} | {s:.3e} |",
+                    v[0],
+                    v[1],
+                    v[2],
+                    c.stiffness.unwrap().value,
+                    c.stiffness_stabilised.unwrap().value
+                );
+            }
+        }
+        println!(
+            "{basis:?}: max cond M {:.3e}, M~ {:.3e}, lumped {:.3e}; CFL M~ in [{:.3e}, {:.3e}], M in [{:.3e}, {:.3e}]",
+            worst[0], worst[1], worst[2], cfl_s.0, cfl_s.1, cfl_c.0, cfl_c.1
+        );
+        // G Table 1: unstabilised 4.7e? (sMPM) and 4.4e43 (GIMP); stabilised 42 and 163.
+        assert!(worst[0] > 1e8, "{basis:?}: {worst:?}");
+        assert!(worst[1] < 1e3, "{basis:?}: {worst:?}");
+        // G Fig. 7: the stabilised CFL number is nearly position independent
+        // (within a factor 2 here), the unstabilised one collapses by orders.
+        assert!(cfl_s.1 / cfl_s.0 < 2.0, "{basis:?}: {cfl_s:?}");
+        assert!(cfl_c.1 / cfl_c.0 > 100.0, "{basis:?}: {cfl_c:?}");
+    }
+}
+
+/// `(1/(nt W0)) sum_i |W_kin,i + W_eps,i - W0|` (G 5.2).
+fn mean_energy_error(reports: &[mpmlab::StepReport]) -> f64 {
+    let w0 = reports[0].dynamics.as_ref().unwrap().initial_energy;
+    reports
+        .iter()
+        .map(|r| (r.energy.kinetic + r.energy.strain - w0).abs())
+        .sum::<f64>()
+        / (reports.len() as f64 * w0)
+}
+
+fn collision(steps: usize, mass: MassKind, update: StressUpdate, gamma_m: Option<f64>) -> Vec<mpmlab::StepReport> {
+    let mut sim = sim_with("ghost-collision-elastic", |s| {
+        s.analysis.load_steps = steps;
+        s.analysis.mass = mass;
+        s.analysis.stress_update = update;
+        s.analysis.condition_every = 0;
+        s.analysis.gamma_m = gamma_m;
+    });
+    run(&mut sim)
+}
+
+#[test]
+fn elastic_collision_energy_error() {
+    // G Table 3 (coarse ghosts, h = 0.1 m, USF, stabilised): 0.888e-3 at
+    // 1000 steps, 0.445e-3 at 2000: first order in dt.
+    let e1 = mean_energy_error(&collision(1000, MassKind::Stabilised, StressUpdate::Usf, None));
+    let e2 = mean_energy_error(&collision(2000, MassKind::Stabilised, StressUpdate::Usf, None));
+    println!(
+        "USF stabilised: {e1:.4e} (1000 steps), {e2:.4e} (2000 steps), ratio {:.3}",
+        e2 / e1
+    );
+    // The paper's level within a factor 3 (our ghost outline and point
+    // lattice are not G's VTK files).
+    assert!(e1 > 0.888e-3 / 3.0 && e1 < 0.888e-3 * 3.0, "{e1:e}");
+    // Halving the time step halves the error (G: ratio 0.501).
+    assert!((e2 / e1 - 0.5).abs() < 0.1, "{}", e2 / e1);
+    // USL with the lumped mass dissipates an order more than USF (G Table 3:
+    // 8.4e-3 against 0.89e-3 at h = 0.1 m, 1000 steps).
+    let ul = mean_energy_error(&collision(1000, MassKind::Lumped, StressUpdate::Usl, None));
+    println!("USL lumped {ul:.4e}, {:.1} x USF stabilised", ul / e1);
+    assert!(ul > 5.0 * e1, "{ul:e} vs {e1:e}");
+    // USL with the stabilised mass: per step the scheme loses
+    // dt^2 (a.M a / 2 + gamma_M a.J_G a) (docs/verification.md), so its
+    // error falls with gamma_M. G reports it an order below USL lumped at
+    // gamma_M = rho/4; we measure it above, see the closing note of issue 6.
+    let us: Vec<f64> = [250.0, 25.0, 2.5]
+        .iter()
+        .map(|&g| mean_energy_error(&collision(1000, MassKind::Stabilised, StressUpdate::Usl, Some(g))))
+        .collect();
+    println!("USL stabilised, gamma_M = rho/4, rho/40, rho/400: {us:?}");
+    assert!(us[0] > 2.0 * us[1] && us[1] > 1.5 * us[2], "{us:?}");
+}
+
+#[test]
+fn collision_conserves_momentum() {
+    // Rows and columns of J_G sum to zero and the consistent mass's column
+    // sums are the lumped masses, so FLIP changes the total momentum by
+    // dt sum_n (f_ext - f_int)_n = 0: conserved to round-off.
+    let reports = collision(300, MassKind::Stabilised, StressUpdate::Usf, None);
+    let sim = sim_with("ghost-collision-elastic", |_| {});
+    let pts = sim.points();
+    let scale: f64 = (0..pts.len())
+        .map(|p| pts.mass[p] * pts.v[p][0].hypot(pts.v[p][1]))
+        .sum();
+    let p0 = pts.momentum();
+    for r in &reports {
+        let p = r.dynamics.as_ref().unwrap().momentum;
+        assert!((p[0] - p0[0]).hypot(p[1] - p0[1]) < 1e-12 * scale, "{p:?}");
+    }
+}
+
+#[test]
+fn plastic_collision_dissipates() {
+    // G 5.3 / Fig. 14 (h = 0.05 m, USF, stabilised): contact near 1.5 s,
+    // then plastic dissipation grows; kinetic + strain + dissipated energy
+    // stays at W0 up to the scheme's error (about 1e-3 W0 in the elastic
+    // case; 2e-2 leaves room for the plastic return map's first-order
+    // energy error).
+    let mut sim = sim_with("ghost-collision-plastic", |s| s.analysis.condition_every = 0);
+    let reports = run(&mut sim);
+    let w0 = reports[0].dynamics.as_ref().unwrap().initial_energy;
+    let at = |t: f64| reports.iter().find(|r| r.dynamics.as_ref().unwrap().time >= t).unwrap();
+    assert_eq!(at(1.0).energy.plastic_dissipation, 0.0, "no yield before contact");
+    let (d2, d35) = (
+        at(2.0).energy.plastic_dissipation,
+        reports.last().unwrap().energy.plastic_dissipation,
+    );
+    println!("W0 {w0:.5e} J; dissipation at 2 s {d2:.4e} J, at 3.5 s {d35:.4e} J");
+    assert!(d2 > 0.0 && d35 > d2, "{d2:e} {d35:e}");
+    assert!(d35 > 0.05 * w0, "{d35:e}");
+    for r in &reports {
+        let e = r.energy.kinetic + r.energy.strain + r.energy.plastic_dissipation;
+        assert!(
+            (e - w0).abs() < 2e-2 * w0,
+            "t = {}: {e:e} vs {w0:e}",
+            r.dynamics.as_ref().unwrap().time
+        );
+    }
+}
