@@ -123,3 +123,52 @@ fn boundary_curves_are_recorded() {
     }
     assert_eq!(length, Some(r.boundaries[0].length));
 }
+
+#[test]
+fn dynamic_run_records_energies_on_the_time_timeline() {
+    // Explicit dynamics: energies, balance and mass conditioning are logged
+    // on `step` and on `time` (simulated seconds), bit-identical to the reports.
+    let mut sim = sim_with("ghost-collision-elastic", |s| {
+        s.analysis.load_steps = 1000;
+        s.analysis.condition_every = 2;
+    });
+    let text = std::fs::read_to_string(common::scene_path("ghost-collision-elastic")).unwrap();
+    let path = temp_path("rec-dyn", "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    let mut reports = Vec::new();
+    for _ in 0..4 {
+        let r = sim.step().unwrap();
+        rec.log_step(&r, &sim).unwrap();
+        reports.push(r);
+    }
+    rec.finish().unwrap();
+    let scalars = rerun::Scalars::descriptor_scalars().component;
+    let time_tl: rerun::TimelineName = "time".into();
+    // entity -> (time in ns -> value)
+    let mut on_time: BTreeMap<String, BTreeMap<i64, f64>> = BTreeMap::new();
+    for chunk in read_chunks(&path) {
+        let e = chunk.entity_path().to_string();
+        for ((t, _), v) in chunk
+            .iter_component_indices(time_tl, scalars)
+            .zip(chunk.iter_slices::<f64>(scalars))
+        {
+            on_time.entry(e.clone()).or_default().insert(t.as_i64(), v[0]);
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    for r in &reports {
+        let d = r.dynamics.as_ref().unwrap();
+        let t = std::time::Duration::from_secs_f64(d.time).as_nanos() as i64;
+        assert_eq!(on_time["/metrics/energy/kinetic"][&t], r.energy.kinetic);
+        assert_eq!(on_time["/metrics/energy/strain"][&t], r.energy.strain);
+        assert_eq!(on_time["/metrics/energy/balance_error"][&t], d.energy_error);
+        if let Some(c) = &d.conditioning {
+            assert_eq!(
+                on_time["/metrics/condition/mass_stabilised"][&t],
+                c.mass_stabilised.value
+            );
+        }
+    }
+    // Condition steps 1, 2 and 4 (every 2nd step and the first).
+    assert_eq!(on_time["/metrics/condition/mass_lumped"].len(), 3);
+}

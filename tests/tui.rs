@@ -145,3 +145,34 @@ fn delta_is_tuned_and_implicit_boundaries_are_drawn() {
         .count();
     assert!(cyan > 20, "implicit boundaries drawn in cyan: {cyan}");
 }
+
+#[test]
+fn dynamics_screen_shows_time_energies_and_runs_on() {
+    // Explicit dynamics: the title shows simulated time, the chart plots
+    // energies against time, and enter keeps asking for steps until paused.
+    let mut sim = sim_with("ghost-collision-elastic", |_| {});
+    let mut app = App::new(&sim, None);
+    assert_eq!(app.apply(Action::RunPause), Some(Command::Step));
+    for _ in 0..3 {
+        let r = sim.step().unwrap();
+        app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+        // Running: the app asks for the next step by itself.
+        assert_eq!(app.pending(), Some(Command::Step));
+    }
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    assert_eq!(app.apply(Action::RunPause), None, "pausing asks for nothing");
+    assert_eq!(app.pending(), None);
+    let lines = screen(&app);
+    let all = lines.join("\n");
+    assert!(
+        lines[0].contains("step 4/1000") && lines[0].contains("t = 0.0140 s"),
+        "{}",
+        lines[0]
+    );
+    assert!(all.contains("energy (J) against time"), "{all}");
+    assert!(all.contains("kinetic 2.13"), "{all}");
+    assert!(all.contains("gamma_M 2.500e2"), "{all}");
+    // gamma_M changes in decades and reaches the engine as a command.
+    assert_eq!(app.apply(Action::LowerGammaM), Some(Command::SetGammaM(25.0)));
+}

@@ -177,7 +177,10 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
         "ghost off".to_string()
     };
     let text = if app.view.time.is_some() {
-        format!("gamma_M {:.3e} kg/m^3  {ghost}  cond {:?}", p.gamma_m, p.condition)
+        format!(
+            "gamma_M {:.3e} kg/m^3 (m/M: /10, x10)  cond {:?}",
+            p.gamma_m, p.condition
+        )
     } else {
         format!(
             "{ghost}  delta/h {:.0e}  tol {:.1e}  max it {}  cond {:?}",

@@ -151,7 +151,9 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
                 let _ = cmd_tx.send(cmd);
             }
             terminal.draw(|f| draw::draw(f, &app))?;
-            if event::poll(Duration::from_millis(50))? {
+            // While running, come back quickly for the next step's update.
+            let wait = if app.running { 2 } else { 50 };
+            if event::poll(Duration::from_millis(wait))? {
                 if let Event::Key(k) = event::read()? {
                     if k.kind == KeyEventKind::Press {
                         if let Some(cmd) = action_for(k.code).and_then(|a| app.apply(a)) {
