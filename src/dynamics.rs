@@ -49,6 +49,10 @@ pub struct DynamicsReport {
     pub energy_error: f64,
     /// `sum_p m_p v_p` after the step (kg m/s per unit thickness).
     pub momentum: P2,
+    /// Kinetic energy of the grid velocities at the end of the step with
+    /// the mass used, `v_{n+1}.M v_{n+1} / 2` (J): the grid's view of
+    /// [`Energy::kinetic`], which is measured on the points.
+    pub kinetic_grid: f64,
     /// Largest grid speed `|v_{n+1}|` of the step (m/s).
     pub max_speed: f64,
     pub mass: MassKind,
@@ -96,14 +100,23 @@ pub(crate) struct MassCache {
 /// A factorised mass matrix on the free dofs.
 enum MassSolver {
     Lumped(Vec<f64>),
-    Consistent(Factor),
+    /// The factor and the matrix (lower triangle).
+    Consistent(Factor, SparseColMat<usize, f64>),
 }
 
 impl MassSolver {
     fn solve(&self, b: &[f64]) -> Vec<f64> {
         match self {
             MassSolver::Lumped(d) => b.iter().zip(d).map(|(b, d)| b / d).collect(),
-            MassSolver::Consistent(f) => linalg::solve(f, b),
+            MassSolver::Consistent(f, _) => linalg::solve(f, b),
+        }
+    }
+
+    /// `v.M v / 2`: the kinetic energy of grid velocities `v` (J).
+    fn energy(&self, v: &[f64]) -> f64 {
+        match self {
+            MassSolver::Lumped(d) => 0.5 * v.iter().zip(d).map(|(v, d)| d * v * v).sum::<f64>(),
+            MassSolver::Consistent(_, m) => 0.5 * dot(v, &linalg::sym_lower_mul(m, v)),
         }
     }
 }
@@ -282,7 +295,7 @@ fn factorise_mass(
             }
         ),
     })?;
-    Ok((MassSolver::Consistent(factor), reused))
+    Ok((MassSolver::Consistent(factor, m), reused))
 }
 
 pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
@@ -549,6 +562,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
             initial_energy: w0,
             energy_error,
             momentum,
+            kinetic_grid: mass.energy(&v1),
             max_speed,
             mass: kind,
             stress_update: a.stress_update,
@@ -774,7 +788,7 @@ impl Simulation {
             let blocks = blocks(&map, &faces);
             let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
             let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, self.params.gamma_m);
-            MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?)
+            MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
         };
         let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
         for p in 0..pts.len() {

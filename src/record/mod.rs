@@ -26,7 +26,7 @@
 //! | `metrics/error/<measure>` | Scalars | every step with an exact solution |
 //! | `metrics/time/<phase>` | Scalars (s) | every step |
 //! | `metrics/unknowns` | Scalars | every step |
-//! | `metrics/energy/{kinetic,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics; also on `time`) | every step |
+//! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics; also on `time`) | every step |
 //! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (explicit dynamics) | every step |
 //! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, failures, end) | as they happen |
@@ -294,6 +294,7 @@ impl Recorder {
         self.rec.set_duration_secs("time", d.time);
         let e = &report.energy;
         self.scalar("metrics/energy/kinetic", e.kinetic)?;
+        self.scalar("metrics/energy/kinetic_grid", d.kinetic_grid)?;
         self.scalar("metrics/energy/total", e.kinetic + e.strain)?;
         self.scalar("metrics/energy/balance_error", d.energy_error)?;
         if d.initial_energy > 0.0 {
