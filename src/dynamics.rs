@@ -16,7 +16,9 @@
 //!    `v_{n+1} = v_n + dt a` (supported components stay at rest);
 //! 6. points: FLIP `v_p += dt sum_v S_vp a_v` or PIC `v_p = sum_v S_vp v_v`;
 //!    `x_p += dt sum_v S_vp v_v`;
-//! 7. USL: update stresses from `dF = I + dt grad v_{n+1}`;
+//! 7. USL: update stresses from `dF = I + dt grad v_{n+1}`; MUSL (Sulsky's
+//!    modified USL): from the updated point velocities mapped back to the
+//!    grid with the same mass;
 //! 8. energies (kinetic, strain, plastic dissipation, work of the loads) and
 //!    their balance against the initial energy; a step whose grid velocities
 //!    or energy explode is a [`StepFailure::Diverged`], non-finite values a
@@ -380,10 +382,36 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
     // 6-7. Points: velocities, positions, then (USL) stresses.
     let t = Instant::now();
     let du1: Vec<P2> = v1n.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
-    let responses = if a.stress_update == StressUpdate::Usl {
-        respond(sim, &map, &du1).0
-    } else {
-        first
+    let old = &sim.state.points;
+    let velocities: Vec<P2> = (0..old.len())
+        .map(|p| {
+            let st = &map.stencils[p];
+            match a.velocity_update {
+                VelocityUpdate::Flip => {
+                    let dv = st.interpolate(|n| an[n]);
+                    [old.v[p][0] + dt * dv[0], old.v[p][1] + dt * dv[1]]
+                }
+                VelocityUpdate::Pic => st.interpolate(|n| v1n[n]),
+            }
+        })
+        .collect();
+    let responses = match a.stress_update {
+        StressUpdate::Usf => first,
+        StressUpdate::Usl => respond(sim, &map, &du1).0,
+        StressUpdate::Musl => {
+            // Sulsky's modified USL: the strain increment from the updated
+            // point velocities mapped back to the grid with the same mass.
+            let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
+            for p in 0..old.len() {
+                for (n, w, _) in map.stencils[p].iter() {
+                    momentum[n][0] += w * old.mass[p] * velocities[p][0];
+                    momentum[n][1] += w * old.mass[p] * velocities[p][1];
+                }
+            }
+            let v = scatter(&map, &mass.solve(&gather(&map, &momentum)));
+            let du: Vec<P2> = v.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
+            respond(sim, &map, &du).0
+        }
     };
     let mut pts = sim.state.points.clone();
     let (mut strain, mut dissipation) = (0.0, 0.0);
@@ -397,13 +425,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
             fastest = (dx[0].hypot(dx[1]), p);
         }
         pts.x[p] = [pts.x[p][0] + dx[0], pts.x[p][1] + dx[1]];
-        pts.v[p] = match a.velocity_update {
-            VelocityUpdate::Flip => {
-                let dv = st.interpolate(|n| an[n]);
-                [pts.v[p][0] + dt * dv[0], pts.v[p][1] + dt * dv[1]]
-            }
-            VelocityUpdate::Pic => st.interpolate(|n| v1n[n]),
-        };
+        pts.v[p] = velocities[p];
         let Some((df, r)) = &responses[p] else { continue };
         let stretch = (df - Matrix2::identity()).norm();
         if !(stretch <= strained.0) {

@@ -252,6 +252,12 @@ fn elastic_collision_energy_error() {
         .collect();
     println!("USL stabilised, gamma_M = rho/4, rho/40, rho/400: {us:?}");
     assert!(us[0] > 2.0 * us[1] && us[1] > 1.5 * us[2], "{us:?}");
+    // Sulsky's modified USL (strain from the updated point velocities mapped
+    // back) removes that term: per step -dt^2 a.M a / 2, the mirror of USF,
+    // which is what G Fig. 13b shows for its stabilised USL.
+    let ms = mean_energy_error(&collision(1000, MassKind::Stabilised, StressUpdate::Musl, None));
+    println!("MUSL stabilised {ms:.4e} ({:.2} x USF stabilised)", ms / e1);
+    assert!(ms < 2.0 * e1 && ms > 0.5 * e1, "{ms:e} vs {e1:e}");
 }
 
 #[test]

@@ -382,6 +382,9 @@ pub enum StressUpdate {
     Usf,
     /// Update stress last, from the end-of-step grid velocities.
     Usl,
+    /// Modified USL (Sulsky et al.): update stress last, from the updated
+    /// point velocities mapped back to the grid with the same mass.
+    Musl,
 }
 
 /// How points take the grid's new velocities.
