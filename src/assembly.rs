@@ -66,6 +66,9 @@ pub struct Mapping {
     /// Cells a point's basis reaches into (standard: the cell holding it;
     /// GIMP: every cell its domain overlaps): the elements of G 4.2.
     pub active_cells: Vec<usize>,
+    /// Cells holding a point (G 3.1's "populated" elements); for GIMP a
+    /// subset of `active_cells`.
+    pub populated_cells: Vec<usize>,
     /// Per grid cell, the fraction of its area the points fill: their
     /// volumes (standard) or their GIMP domains' overlap with the cell.
     pub cell_fill: Vec<f64>,
@@ -137,6 +140,13 @@ impl Mapping {
             }
         }
         let active_cells = (0..cells.len()).filter(|&c| cells[c]).collect();
+        let mut populated = vec![false; grid.num_cells()];
+        for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+            if let Some((i, j)) = grid.cell_of(pts.x[p]) {
+                populated[j * grid.nx + i] = true;
+            }
+        }
+        let populated_cells = (0..populated.len()).filter(|&c| populated[c]).collect();
 
         // Prescribed components: later conditions override earlier ones.
         let mut prescribed: Vec<[Option<f64>; 2]> = vec![[None, None]; grid.num_nodes()];
@@ -185,6 +195,7 @@ impl Mapping {
                 active_nodes,
             },
             active_cells,
+            populated_cells,
             cell_fill,
         }
     }

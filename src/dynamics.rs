@@ -284,11 +284,17 @@ fn factorise_mass(
     let factor = linalg::cholesky_with(symbolic, &m).map_err(|e| StepFailure::Singular {
         step,
         reason: format!(
-            "the {} mass matrix cannot be factorised: {e}{}",
+            "the {} mass matrix cannot be factorised: {}{}",
             if kind == MassKind::Stabilised {
                 "stabilised"
             } else {
                 "consistent"
+            },
+            match e {
+                linalg::FactorError::NotPositiveDefinite { pivot } => format!(
+                    "not positive definite to working precision (pivot {pivot} of the permuted system): a node is held by almost no mass"
+                ),
+                other => other.to_string(),
             },
             if kind == MassKind::Consistent {
                 " (nodes barely touched by points; use mass = \"stabilised\" or \"lumped\")"
@@ -319,7 +325,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
     );
     let stabilised = a.mass == MassKind::Stabilised && sim.params.gamma_m > 0.0;
     let faces = if stabilised {
-        ghost::faces_of(&sim.model.grid, &map)
+        ghost::faces_of(&sim.model.grid, &map, sim.model.analysis.ghost_cells)
     } else {
         Vec::new()
     };
@@ -530,7 +536,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
     let conditioning = (sim.params.condition != ConditionMode::Off && every > 0 && (step % every == 0 || step == 1))
         .then(|| {
             let faces = if faces.is_empty() {
-                ghost::faces_of(&sim.model.grid, &map)
+                ghost::faces_of(&sim.model.grid, &map, sim.model.analysis.ghost_cells)
             } else {
                 faces.clone()
             };
@@ -780,7 +786,7 @@ impl Simulation {
     pub fn conditioning(&self) -> Conditioning {
         let model = &self.model;
         let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
-        let faces = ghost::faces_of(&model.grid, &map);
+        let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
         let mut c = conditioning_on(self, &map, &faces);
         let blocks = blocks(&map, &faces);
         let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower);
@@ -800,7 +806,7 @@ impl Simulation {
         let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
         let pts = &self.state.points;
         let faces = if kind == MassKind::Stabilised {
-            ghost::faces_of(&model.grid, &map)
+            ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells)
         } else {
             Vec::new()
         };

@@ -18,6 +18,7 @@
 //! so rigid translations are not penalised.
 
 use crate::grid::Grid;
+pub use crate::scene::GhostCells;
 
 /// One face of Gamma: its six nodes and the 6 x 6 scalar matrix
 /// `(h^3/3) int a a^T dGamma` (to be taken `(x) I_2`).
@@ -47,9 +48,13 @@ pub fn face_segment(grid: &Grid, f: &GhostFace) -> ([f64; 2], [f64; 2]) {
     }
 }
 
-/// The ghost faces of a mapping's active cells.
-pub fn faces_of(grid: &Grid, map: &crate::assembly::Mapping) -> Vec<GhostFace> {
-    faces(grid, &map.active_cells, &map.cell_fill)
+/// The ghost faces of a mapping, with `cells` deciding which cells count
+/// as active.
+pub fn faces_of(grid: &Grid, map: &crate::assembly::Mapping, cells: GhostCells) -> Vec<GhostFace> {
+    match cells {
+        GhostCells::Reached => faces(grid, &map.active_cells, &map.cell_fill),
+        GhostCells::Populated => faces(grid, &map.populated_cells, &map.cell_fill),
+    }
 }
 
 /// Fill fraction below which a cell on the grid's edge counts as cut by the

@@ -140,7 +140,7 @@ pub(crate) fn tangent(
 /// The ghost faces of this step (none when `gamma_K = 0`).
 fn ghost_faces(sim: &Simulation, map: &Mapping) -> Vec<GhostFace> {
     if sim.params.gamma_k > 0.0 {
-        ghost::faces_of(&sim.model.grid, map)
+        ghost::faces_of(&sim.model.grid, map, sim.model.analysis.ghost_cells)
     } else {
         Vec::new()
     }

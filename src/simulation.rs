@@ -451,7 +451,7 @@ impl Simulation {
         // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
         let gamma = self.params.gamma_k;
         let faces = if gamma > 0.0 {
-            ghost::faces_of(grid, &map)
+            ghost::faces_of(grid, &map, self.model.analysis.ghost_cells)
         } else {
             Vec::new()
         };

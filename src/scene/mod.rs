@@ -359,6 +359,19 @@ pub enum AnalysisKind {
     ExplicitDynamics,
 }
 
+/// Which cells count as active for the ghost face set (G 4.2).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GhostCells {
+    /// Every cell a point's basis reaches (GIMP: every cell a domain
+    /// overlaps), so nodes that domains barely touch are held by faces.
+    #[default]
+    Reached,
+    /// Cells holding a point (G 3.1's populated elements): cells that only a
+    /// GIMP domain reaches count as unpopulated.
+    Populated,
+}
+
 /// Mass matrix of explicit dynamics (G 2.3, 3.3).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -427,6 +440,9 @@ pub struct AnalysisSpec {
     /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.
     #[serde(default)]
     pub gamma_k: f64,
+    /// Which cells the ghost face set treats as active.
+    #[serde(default)]
+    pub ghost_cells: GhostCells,
     /// Implicit-boundary bandwidth as a fraction of the cell size (C: 1e-6).
     #[serde(default = "default_delta_over_h")]
     pub delta_over_h: f64,
