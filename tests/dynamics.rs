@@ -29,6 +29,14 @@ fn ghost_region_has_the_papers_area() {
     .unwrap();
     let area = r.area();
     assert!((area / 0.107363 - 1.0).abs() < 1e-3, "{area}");
+    // G's three resolutions (Table 2): 646, 2389 and 9613 points per ghost;
+    // lattices of 31^2, 60^2 and 120^2 over the 0.4 m box come within 3%.
+    for (n, g) in [(31, 646.0), (60, 2389.0), (120, 9613.0)] {
+        let sim = sim_with("stretching-ghost", |s| s.bodies[0].lattice = Some([n, n]));
+        let count = sim.points().len() as f64;
+        println!("lattice {n}^2: {count} points (G {g})");
+        assert!((count / g - 1.0).abs() < 0.03, "{count} vs {g}");
+    }
     // Eye holes: the eye centres are outside the region, the head inside.
     assert!(!r.contains([0.3 + 0.4 * 0.32, 0.3 + 0.4 * 0.6]));
     assert!(r.contains([0.5, 0.3 + 0.4 * 0.9]));
