@@ -38,6 +38,7 @@ pub mod quadrature;
 pub mod record;
 pub mod scene;
 pub mod simulation;
+pub mod sweep;
 pub mod tui;
 
 pub use model::Model;

@@ -50,6 +50,39 @@ enum Cmd {
         #[arg(default_value = "scenarios")]
         dir: PathBuf,
     },
+    /// Run a scene over the cross product of settings (or a preset of a
+    /// paper study): a CSV row per run, rates, Pareto front, SVG charts.
+    Sweep {
+        /// Scene file (not with --preset or --collect).
+        scene: Option<PathBuf>,
+        /// `key=v1,v2,...`; keys: h, ppc, delta_over_h, gamma_k, gamma_m,
+        /// steps, tolerance, mass, ... or a dotted scene path
+        /// (`analysis.max_iterations`, `body.0.basis`).
+        #[arg(long = "vary", value_name = "KEY=V1,V2,...")]
+        vary: Vec<String>,
+        /// A paper study: plate-hole-h, delta, beam-stability, column-gamma.
+        #[arg(long, conflicts_with = "scene")]
+        preset: Option<String>,
+        /// Runs at a time (each single-threaded, in its own process).
+        #[arg(long, default_value_t = 1)]
+        jobs: usize,
+        /// Sweep folder (default sweeps/<scene or preset>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write one command per pending run to <out>/jobs.txt instead of running.
+        #[arg(long)]
+        emit_jobs: bool,
+        /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
+        collect: Option<PathBuf>,
+    },
+    /// Run one scene of a sweep and write its result row (used by `sweep`
+    /// and by emitted job lists).
+    SweepRun {
+        scene: PathBuf,
+        #[arg(long)]
+        result: PathBuf,
+    },
     /// Step a scene interactively in the terminal.
     Tui {
         scene: Option<PathBuf>,
@@ -69,6 +102,24 @@ fn main() -> ExitCode {
         Some(Cmd::Run { scene, record, quiet }) => run(&scene, record.as_deref(), quiet),
         Some(Cmd::Check { scene }) => check(&scene),
         Some(Cmd::List { dir }) => list(&dir),
+        Some(Cmd::Sweep {
+            scene,
+            vary,
+            preset,
+            jobs,
+            out,
+            emit_jobs,
+            collect,
+        }) => sweep(SweepArgs {
+            scene,
+            vary,
+            preset,
+            jobs,
+            out,
+            emit_jobs,
+            collect,
+        }),
+        Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
         Some(Cmd::Tui {
             scene,
             record,
@@ -399,6 +450,93 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
         }
     }
     Ok(code)
+}
+
+struct SweepArgs {
+    scene: Option<PathBuf>,
+    vary: Vec<String>,
+    preset: Option<String>,
+    jobs: usize,
+    out: Option<PathBuf>,
+    emit_jobs: bool,
+    collect: Option<PathBuf>,
+}
+
+/// `mpmlab sweep`: plan, run (or emit) and summarise. Exit 2 for bad
+/// arguments or scenes; failed runs are rows of the table, not errors.
+fn sweep(a: SweepArgs) -> Result<ExitCode> {
+    use mpmlab::sweep::{driver, presets, Folder, Vary};
+    if let Some(dir) = a.collect {
+        let folder = Folder(dir.clone());
+        let title = dir
+            .file_name()
+            .map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
+        out!("{}", driver::finish(&folder, &title).map_err(anyhow::Error::msg)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let (name, path, fixed, mut varies) = match (&a.preset, &a.scene) {
+        (Some(p), _) => {
+            let pr = presets::preset(p)
+                .with_context(|| format!("no preset `{p}`; presets: {}", presets::NAMES.join(", ")))?;
+            out!("preset `{}`: {}", pr.name, pr.about);
+            let path = PathBuf::from("scenarios").join(format!("{}.toml", pr.scene));
+            (pr.name.to_string(), path, pr.fixed, pr.vary)
+        }
+        (None, Some(s)) => (
+            s.file_stem()
+                .map_or("sweep".into(), |n| n.to_string_lossy().into_owned()),
+            s.clone(),
+            Vec::new(),
+            Vec::new(),
+        ),
+        (None, None) => anyhow::bail!("give a scene file, --preset NAME or --collect DIR"),
+    };
+    for v in &a.vary {
+        varies.push(Vary::parse(v).map_err(anyhow::Error::msg)?);
+    }
+    if varies.is_empty() {
+        anyhow::bail!("nothing to vary: give --vary KEY=V1,V2,...");
+    }
+    let base = std::fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    // The base scene must be valid before anything is written.
+    if let Err(code) = load(&path) {
+        return Ok(code);
+    }
+    let folder = Folder(a.out.unwrap_or_else(|| PathBuf::from("sweeps").join(&name)));
+    let runs = driver::prepare(&folder, &base, &fixed, &varies).map_err(anyhow::Error::msg)?;
+    let todo = driver::pending(&folder, &runs);
+    let exe = std::env::current_exe().context("cannot find the mpmlab executable")?;
+    out!(
+        "sweep `{name}` in {}: {} runs, {} already done",
+        folder.0.display(),
+        runs.len(),
+        runs.len() - todo.len()
+    );
+    if a.emit_jobs {
+        let p = driver::emit_jobs(&folder, &exe, &todo).map_err(anyhow::Error::msg)?;
+        out!(
+            "wrote {} commands to {}; run them anywhere (e.g. `parallel < {}`), then `mpmlab sweep --collect {}`",
+            todo.len(),
+            p.display(),
+            p.display(),
+            folder.0.display()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
+    driver::execute(&folder, &exe, &todo, a.jobs, &|line| out!("{line}"));
+    out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `mpmlab sweep-run`: one run, its result row to `result`.
+fn sweep_run(scene: &Path, result: &Path) -> Result<ExitCode> {
+    let r = mpmlab::sweep::run_file(scene);
+    if let Some(dir) = result.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    std::fs::write(result, mpmlab::sweep::to_csv(std::slice::from_ref(&r)))
+        .with_context(|| format!("cannot write {}", result.display()))?;
+    Ok(ExitCode::SUCCESS)
 }
 
 fn timestamp() -> String {

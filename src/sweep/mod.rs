@@ -1,0 +1,703 @@
+//! Sweeps: one scene run over the cross product of settings, each run a
+//! row of a CSV file with its cost (wall time by phase, unknowns, Newton
+//! iterations, peak memory) and its outcome (completed or where and why it
+//! failed, final errors against the exact solution).
+//!
+//! A sweep lives in a folder:
+//!
+//! | path | what |
+//! |---|---|
+//! | `runs/<id>.toml` | the scene of each run, with its settings in a first-line comment |
+//! | `results/<id>.csv` | one run's result (header and one row), written by `mpmlab sweep-run` |
+//! | `sweep.csv` | every result, in run order: the table to read |
+//! | `jobs.txt` | with `--emit-jobs`: one command per run, for GNU parallel or a Slurm array |
+//! | `charts/*.svg` | error against wall time (Pareto front marked), error against h, stability map |
+//!
+//! Runs whose result exists are not run again, so an interrupted sweep
+//! resumes, and results computed elsewhere are merged by `--collect`.
+
+pub mod driver;
+pub mod presets;
+pub mod svg;
+
+use crate::scene::Scene;
+use crate::simulation::{Simulation, StepFailure};
+use crate::Model;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// One varied setting: a key and its values (TOML literals; bare words
+/// are strings).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vary {
+    pub key: String,
+    pub values: Vec<String>,
+}
+
+impl Vary {
+    /// Parse `key=v1,v2,...`.
+    pub fn parse(s: &str) -> Result<Vary, String> {
+        let (key, values) = s
+            .split_once('=')
+            .ok_or_else(|| format!("`{s}`: expected key=value1,value2,..."))?;
+        let values: Vec<String> = split_values(values);
+        if key.trim().is_empty() || values.is_empty() || values.iter().any(|v| v.is_empty()) {
+            return Err(format!("`{s}`: expected key=value1,value2,..."));
+        }
+        Ok(Vary {
+            key: key.trim().to_string(),
+            values,
+        })
+    }
+}
+
+/// Split on commas outside brackets and quotes (`[1.0, 2.0]` is one value).
+fn split_values(s: &str) -> Vec<String> {
+    let (mut out, mut cur, mut depth, mut quoted) = (Vec::new(), String::new(), 0i32, false);
+    for c in s.chars() {
+        match c {
+            '"' => quoted = !quoted,
+            '[' if !quoted => depth += 1,
+            ']' if !quoted => depth -= 1,
+            ',' if !quoted && depth == 0 => {
+                out.push(cur.trim().to_string());
+                cur.clear();
+                continue;
+            }
+            _ => {}
+        }
+        cur.push(c);
+    }
+    out.push(cur.trim().to_string());
+    out
+}
+
+/// Scene paths behind the short keys; any other key is a dotted path into
+/// the scene (`analysis.max_iterations`, `body.0.basis`; `*` for every
+/// element of an array).
+pub fn key_paths(key: &str) -> Vec<String> {
+    let p: &[&str] = match key {
+        "h" => &["grid.h"],
+        "ppc" => &["body.*.points_per_cell"],
+        "delta_over_h" | "delta" | "gamma_k" | "gamma_m" | "tolerance" | "max_iterations" | "mass"
+        | "stress_update" | "velocity_update" | "condition" | "ghost_cells" => {
+            return vec![format!("analysis.{key}")];
+        }
+        "steps" => &["analysis.load_steps"],
+        other => return vec![other.to_string()],
+    };
+    p.iter().map(|s| s.to_string()).collect()
+}
+
+/// Keys whose values are real numbers even when written without a point.
+const REAL: &[&str] = &[
+    "h",
+    "delta_over_h",
+    "delta",
+    "gamma_k",
+    "gamma_m",
+    "tolerance",
+    "duration",
+    "E",
+    "nu",
+    "density",
+];
+
+/// The TOML value of a written setting.
+fn value_of(text: &str) -> toml::Value {
+    let parsed = format!("v = {text}")
+        .parse::<toml::Table>()
+        .ok()
+        .and_then(|mut t| t.remove("v"));
+    parsed.unwrap_or_else(|| toml::Value::String(text.to_string()))
+}
+
+/// Set `key` to `value` in a parsed scene.
+pub fn apply(scene: &mut toml::Table, key: &str, value: &str) -> Result<(), String> {
+    let mut v = value_of(value);
+    let last = key.rsplit('.').next().unwrap_or(key);
+    if let toml::Value::Integer(i) = v {
+        if REAL.contains(&key) || REAL.contains(&last) {
+            v = toml::Value::Float(i as f64);
+        }
+    }
+    for path in key_paths(key) {
+        let parts: Vec<&str> = path.split('.').collect();
+        set(scene, &parts, &v).map_err(|e| format!("{key} = {value}: {e}"))?;
+    }
+    Ok(())
+}
+
+fn set(table: &mut toml::Table, parts: &[&str], v: &toml::Value) -> Result<(), String> {
+    let (head, rest) = (parts[0], &parts[1..]);
+    if rest.is_empty() {
+        table.insert(head.to_string(), v.clone());
+        return Ok(());
+    }
+    let entry = table
+        .entry(head.to_string())
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    set_in(entry, rest, v, head)
+}
+
+fn set_in(node: &mut toml::Value, parts: &[&str], v: &toml::Value, name: &str) -> Result<(), String> {
+    match node {
+        toml::Value::Table(t) => set(t, parts, v),
+        toml::Value::Array(a) => {
+            let (idx, rest) = (parts[0], &parts[1..]);
+            let targets: Vec<usize> = if idx == "*" {
+                (0..a.len()).collect()
+            } else {
+                vec![idx
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&i| i < a.len())
+                    .ok_or_else(|| format!("`{name}` has no element {idx}"))?]
+            };
+            for i in targets {
+                if rest.is_empty() {
+                    a[i] = v.clone();
+                } else {
+                    set_in(&mut a[i], rest, v, name)?;
+                }
+            }
+            Ok(())
+        }
+        _ => Err(format!("`{name}` is not a table")),
+    }
+}
+
+/// One run of a sweep: its settings in order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Run {
+    pub id: String,
+    pub settings: Vec<(String, String)>,
+}
+
+/// The cross product of the varied settings, first key slowest.
+pub fn expand(varies: &[Vary]) -> Vec<Run> {
+    let mut runs = vec![Vec::new()];
+    for v in varies {
+        runs = runs
+            .into_iter()
+            .flat_map(|r: Vec<(String, String)>| {
+                v.values.iter().map(move |x| {
+                    let mut r = r.clone();
+                    r.push((v.key.clone(), x.clone()));
+                    r
+                })
+            })
+            .collect();
+    }
+    runs.into_iter()
+        .map(|settings| Run {
+            id: run_id(&settings),
+            settings,
+        })
+        .collect()
+}
+
+/// A file-name-safe id from settings: `h=0.5_ppc=2`.
+fn run_id(settings: &[(String, String)]) -> String {
+    let raw: Vec<String> = settings.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    let id: String = raw
+        .join("_")
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "=._-+".contains(c) {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect();
+    if id.is_empty() {
+        "base".into()
+    } else {
+        id
+    }
+}
+
+/// First line of a run's scene file: its id and settings, so that a result
+/// computed anywhere carries them.
+const HEADER: &str = "# mpmlab-sweep-run: ";
+
+/// The scene text of a run: `base` with `fixed` and the run's settings applied.
+pub fn run_scene(base: &str, fixed: &[(String, String)], run: &Run) -> Result<String, String> {
+    let mut t: toml::Table = base.parse().map_err(|e| format!("the base scene: {e}"))?;
+    for (k, v) in fixed.iter().chain(&run.settings) {
+        apply(&mut t, k, v)?;
+    }
+    let body = toml::to_string(&t).map_err(|e| e.to_string())?;
+    let settings: Vec<String> = run.settings.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    Ok(format!("{HEADER}id={} {}\n{body}", run.id, settings.join(" ")))
+}
+
+/// The id and settings in a run's scene file header.
+fn read_header(text: &str) -> (String, Vec<(String, String)>) {
+    let line = text.lines().next().unwrap_or("");
+    let Some(rest) = line.strip_prefix(HEADER) else {
+        return ("base".into(), Vec::new());
+    };
+    let mut id = "base".to_string();
+    let mut settings = Vec::new();
+    for kv in rest.split_whitespace() {
+        if let Some((k, v)) = kv.split_once('=') {
+            if k == "id" {
+                id = v.to_string();
+            } else {
+                settings.push((k.to_string(), v.to_string()));
+            }
+        }
+    }
+    (id, settings)
+}
+
+/// The outcome and cost of one run: a row of `sweep.csv`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunResult {
+    pub id: String,
+    pub settings: Vec<(String, String)>,
+    pub completed: bool,
+    pub steps_done: usize,
+    pub steps_total: usize,
+    /// The failed step (0: none).
+    pub failed_step: usize,
+    /// Why the run stopped early, or why the scene was rejected.
+    pub failure: String,
+    /// Wall time of all steps, and by phase (s).
+    pub wall_s: f64,
+    pub assembly_s: f64,
+    pub factorisation_s: f64,
+    pub solve_s: f64,
+    pub condition_s: f64,
+    /// Unknowns of the last step.
+    pub unknowns: usize,
+    /// Newton iterations over all steps (linear steps count one).
+    pub iterations: usize,
+    /// Peak resident memory of the process that ran it (kB; 0 when unknown).
+    pub peak_rss_kb: u64,
+    /// Condition number of the last step (NaN when not computed).
+    pub condition: f64,
+    /// Errors against the exact solution after the last completed step.
+    pub errors: Vec<(String, f64)>,
+}
+
+/// Peak resident set size of this process (kB), from `/proc/self/status`.
+fn peak_rss_kb() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        })
+        .unwrap_or(0)
+}
+
+/// Run the scene file of one run in this process, to the end or the first
+/// failure.
+pub fn run_file(path: &Path) -> RunResult {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let (id, settings) = read_header(&text);
+    let mut r = RunResult {
+        id,
+        settings,
+        condition: f64::NAN,
+        ..Default::default()
+    };
+    let file = path.display().to_string();
+    let sim = Scene::parse(&text, &file).and_then(|s| Model::build(&s, &text, &file));
+    let mut sim = match sim {
+        Ok(m) => Simulation::new(m),
+        Err(e) => {
+            r.failure = format!("bad scene: {e}");
+            r.peak_rss_kb = peak_rss_kb();
+            return r;
+        }
+    };
+    r.steps_total = sim.load_steps();
+    let start = Instant::now();
+    while !sim.finished() {
+        match sim.step() {
+            Ok(rep) => {
+                let t = rep.timings;
+                r.assembly_s += t.assembly;
+                r.factorisation_s += t.factorisation;
+                r.solve_s += t.solve;
+                r.condition_s += t.condition;
+                r.unknowns = rep.unknowns;
+                r.iterations += rep.iterations.max(1);
+                r.condition = rep.condition.map_or(f64::NAN, |c| c.value);
+                r.errors = rep.errors.iter().map(|e| (e.name.to_string(), e.value)).collect();
+                r.steps_done = rep.step;
+            }
+            Err(f) => {
+                r.failed_step = f.step();
+                r.failure = one_line(&f);
+                break;
+            }
+        }
+    }
+    r.wall_s = start.elapsed().as_secs_f64();
+    r.completed = sim.finished() && r.failed_step == 0;
+    r.peak_rss_kb = peak_rss_kb();
+    r
+}
+
+fn one_line(f: &StepFailure) -> String {
+    f.to_string().replace('\n', " ")
+}
+
+/// The fixed columns of `sweep.csv`, after `id` and the settings.
+pub const COLUMNS: &[&str] = &[
+    "completed",
+    "steps_done",
+    "steps_total",
+    "failed_step",
+    "failure",
+    "wall_s",
+    "assembly_s",
+    "factorisation_s",
+    "solve_s",
+    "condition_s",
+    "unknowns",
+    "iterations",
+    "peak_rss_kb",
+    "condition",
+];
+
+fn num(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:e}")
+    } else {
+        String::new()
+    }
+}
+
+impl RunResult {
+    /// Column names and values: `id`, `set:<key>` per setting, [`COLUMNS`],
+    /// `error:<name>` per error.
+    pub fn fields(&self) -> Vec<(String, String)> {
+        let mut f = vec![("id".to_string(), self.id.clone())];
+        for (k, v) in &self.settings {
+            f.push((format!("set:{k}"), v.clone()));
+        }
+        let vals = [
+            self.completed.to_string(),
+            self.steps_done.to_string(),
+            self.steps_total.to_string(),
+            self.failed_step.to_string(),
+            self.failure.clone(),
+            num(self.wall_s),
+            num(self.assembly_s),
+            num(self.factorisation_s),
+            num(self.solve_s),
+            num(self.condition_s),
+            self.unknowns.to_string(),
+            self.iterations.to_string(),
+            self.peak_rss_kb.to_string(),
+            num(self.condition),
+        ];
+        for (c, v) in COLUMNS.iter().zip(vals) {
+            f.push((c.to_string(), v));
+        }
+        for (n, v) in &self.errors {
+            f.push((format!("error:{n}"), num(*v)));
+        }
+        f
+    }
+
+    /// Read back from named fields (missing numbers are NaN or 0).
+    pub fn from_fields(f: &BTreeMap<String, String>, order: &[String]) -> RunResult {
+        let s = |k: &str| f.get(k).cloned().unwrap_or_default();
+        let x = |k: &str| s(k).parse::<f64>().unwrap_or(f64::NAN);
+        let n = |k: &str| s(k).parse::<usize>().unwrap_or(0);
+        RunResult {
+            id: s("id"),
+            settings: order
+                .iter()
+                .filter_map(|c| c.strip_prefix("set:").map(|k| (k.to_string(), s(c))))
+                .filter(|(_, v)| !v.is_empty())
+                .collect(),
+            completed: s("completed") == "true",
+            steps_done: n("steps_done"),
+            steps_total: n("steps_total"),
+            failed_step: n("failed_step"),
+            failure: s("failure"),
+            wall_s: x("wall_s"),
+            assembly_s: x("assembly_s"),
+            factorisation_s: x("factorisation_s"),
+            solve_s: x("solve_s"),
+            condition_s: x("condition_s"),
+            unknowns: n("unknowns"),
+            iterations: n("iterations"),
+            peak_rss_kb: s("peak_rss_kb").parse().unwrap_or(0),
+            condition: x("condition"),
+            errors: order
+                .iter()
+                .filter_map(|c| c.strip_prefix("error:").map(|k| (k.to_string(), x(c))))
+                .filter(|(_, v)| !v.is_nan())
+                .collect(),
+        }
+    }
+
+    /// The cost charts and the Pareto front use: wall time without the
+    /// condition numbers, a diagnostic the solution does not need (s).
+    pub fn cost(&self) -> f64 {
+        (self.wall_s - self.condition_s.max(0.0)).max(0.0)
+    }
+
+    /// The first error measure, the one charts and the Pareto front use.
+    pub fn error(&self) -> Option<f64> {
+        self.errors.first().map(|e| e.1).filter(|e| e.is_finite())
+    }
+
+    /// A setting's value as a number.
+    pub fn setting(&self, key: &str) -> Option<f64> {
+        self.settings
+            .iter()
+            .find(|(k, _)| k == key)
+            .and_then(|(_, v)| v.parse().ok())
+    }
+}
+
+/// One CSV field, quoted when it must be.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Parse CSV text (RFC 4180 quoting) into rows of fields.
+pub fn parse_csv(text: &str) -> Vec<Vec<String>> {
+    let (mut rows, mut row, mut field) = (Vec::new(), Vec::new(), String::new());
+    let mut chars = text.chars().peekable();
+    let mut quoted = false;
+    while let Some(c) = chars.next() {
+        match (quoted, c) {
+            (true, '"') if chars.peek() == Some(&'"') => {
+                field.push('"');
+                chars.next();
+            }
+            (true, '"') => quoted = false,
+            (true, c) => field.push(c),
+            (false, '"') => quoted = true,
+            (false, ',') => row.push(std::mem::take(&mut field)),
+            (false, '\n') => {
+                row.push(std::mem::take(&mut field));
+                rows.push(std::mem::take(&mut row));
+            }
+            (false, '\r') => {}
+            (false, c) => field.push(c),
+        }
+    }
+    if !field.is_empty() || !row.is_empty() {
+        row.push(field);
+        rows.push(row);
+    }
+    rows
+}
+
+/// CSV text of results: the union of their columns, in first-seen order.
+pub fn to_csv(results: &[RunResult]) -> String {
+    let mut columns: Vec<String> = Vec::new();
+    let rows: Vec<Vec<(String, String)>> = results.iter().map(|r| r.fields()).collect();
+    for row in &rows {
+        for (c, _) in row {
+            if !columns.contains(c) {
+                columns.push(c.clone());
+            }
+        }
+    }
+    // Settings first, errors last, whatever order runs brought them in.
+    let rank = |c: &String| {
+        if c == "id" {
+            0
+        } else if c.starts_with("set:") {
+            1
+        } else if c.starts_with("error:") {
+            3
+        } else {
+            2
+        }
+    };
+    columns.sort_by_key(rank);
+    let mut out = columns.iter().map(|c| csv_field(c)).collect::<Vec<_>>().join(",");
+    out.push('\n');
+    for row in rows {
+        let m: BTreeMap<_, _> = row.into_iter().collect();
+        let line: Vec<String> = columns
+            .iter()
+            .map(|c| csv_field(m.get(c).map_or("", String::as_str)))
+            .collect();
+        out.push_str(&line.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Results from CSV text written by [`to_csv`].
+pub fn from_csv(text: &str) -> Vec<RunResult> {
+    let rows = parse_csv(text);
+    let Some((header, body)) = rows.split_first() else {
+        return Vec::new();
+    };
+    body.iter()
+        .filter(|r| r.len() == header.len())
+        .map(|r| {
+            let m: BTreeMap<String, String> = header.iter().cloned().zip(r.iter().cloned()).collect();
+            RunResult::from_fields(&m, header)
+        })
+        .collect()
+}
+
+/// Indices of the runs on the Pareto front of (wall time, error): no other
+/// run is at least as fast and at least as accurate and better in one.
+/// Runs without a finite time and error are not candidates.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
+    let ok = |p: &(f64, f64)| p.0.is_finite() && p.1.is_finite();
+    (0..points.len())
+        .filter(|&i| ok(&points[i]))
+        .filter(|&i| {
+            let (t, e) = points[i];
+            !points
+                .iter()
+                .any(|q| ok(q) && q.0 <= t && q.1 <= e && (q.0 < t || q.1 < e))
+        })
+        .collect()
+}
+
+/// Observed convergence rates `log(e1/e2) / log(h1/h2)` between successive
+/// refinements of `h`, in each group of runs that share every other
+/// setting: `(group label, h1, h2, error name, rate)`.
+pub fn rates(results: &[RunResult], h_key: &str) -> Vec<(String, f64, f64, String, f64)> {
+    let mut groups: BTreeMap<String, Vec<&RunResult>> = BTreeMap::new();
+    for r in results.iter().filter(|r| r.completed && r.setting(h_key).is_some()) {
+        let label: Vec<String> = r
+            .settings
+            .iter()
+            .filter(|(k, _)| k != h_key)
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        groups.entry(label.join(" ")).or_default().push(r);
+    }
+    let mut out = Vec::new();
+    for (label, mut g) in groups {
+        g.sort_by(|a, b| b.setting(h_key).partial_cmp(&a.setting(h_key)).unwrap());
+        for w in g.windows(2) {
+            let (h1, h2) = (w[0].setting(h_key).unwrap(), w[1].setting(h_key).unwrap());
+            for (name, e1) in &w[0].errors {
+                let Some((_, e2)) = w[1].errors.iter().find(|(n, _)| n == name) else {
+                    continue;
+                };
+                if *e1 > 0.0 && *e2 > 0.0 && h1 != h2 {
+                    out.push((label.clone(), h1, h2, name.clone(), (e1 / e2).ln() / (h1 / h2).ln()));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Where a sweep keeps its files.
+pub struct Folder(pub PathBuf);
+
+impl Folder {
+    pub fn runs(&self) -> PathBuf {
+        self.0.join("runs")
+    }
+    pub fn results(&self) -> PathBuf {
+        self.0.join("results")
+    }
+    pub fn run_scene(&self, id: &str) -> PathBuf {
+        self.runs().join(format!("{id}.toml"))
+    }
+    pub fn result(&self, id: &str) -> PathBuf {
+        self.results().join(format!("{id}.csv"))
+    }
+    pub fn csv(&self) -> PathBuf {
+        self.0.join("sweep.csv")
+    }
+    pub fn charts(&self) -> PathBuf {
+        self.0.join("charts")
+    }
+
+    /// Every result in `results/` and `sweep.csv`, by id (a result file
+    /// wins over an older row of the table).
+    pub fn collect(&self) -> BTreeMap<String, RunResult> {
+        let mut all = BTreeMap::new();
+        if let Ok(t) = std::fs::read_to_string(self.csv()) {
+            for r in from_csv(&t) {
+                all.insert(r.id.clone(), r);
+            }
+        }
+        if let Ok(dir) = std::fs::read_dir(self.results()) {
+            for e in dir.flatten() {
+                if let Ok(t) = std::fs::read_to_string(e.path()) {
+                    for r in from_csv(&t) {
+                        all.insert(r.id.clone(), r);
+                    }
+                }
+            }
+        }
+        all
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_of_a_synthetic_set() {
+        // (time, error): 0 and 2 and 4 are on the front; 1 is slower and
+        // worse than 0; 3 is dominated by 2; 5 has no error.
+        let pts = [
+            (1.0, 1e-2),
+            (2.0, 2e-2),
+            (3.0, 1e-3),
+            (4.0, 1e-3),
+            (10.0, 1e-5),
+            (0.5, f64::NAN),
+        ];
+        assert_eq!(pareto_front(&pts), vec![0, 2, 4]);
+    }
+
+    #[test]
+    fn csv_round_trip_with_quotes() {
+        let r = RunResult {
+            id: "h=0.5".into(),
+            settings: vec![("h".into(), "0.5".into())],
+            failure: "step 3 failed: residual \"big\", 1e-3".into(),
+            errors: vec![("stress_l2".into(), 0.125)],
+            condition: f64::NAN,
+            ..Default::default()
+        };
+        let back = from_csv(&to_csv(std::slice::from_ref(&r)));
+        assert_eq!(back.len(), 1);
+        assert_eq!(back[0].failure, r.failure);
+        assert_eq!(back[0].errors, r.errors);
+        assert_eq!(back[0].settings, r.settings);
+    }
+
+    #[test]
+    fn settings_reach_the_scene() {
+        let mut t: toml::Table = "[grid]\nh = 1.0\n[[body]]\npoints_per_cell = 1\n[[body]]\npoints_per_cell = 1\n[analysis]\nload_steps = 1\n"
+            .parse()
+            .unwrap();
+        apply(&mut t, "h", "1").unwrap();
+        apply(&mut t, "ppc", "3").unwrap();
+        apply(&mut t, "gamma_k", "5").unwrap();
+        apply(&mut t, "mass", "lumped").unwrap();
+        assert_eq!(t["grid"]["h"].as_float(), Some(1.0));
+        assert_eq!(t["body"][1]["points_per_cell"].as_integer(), Some(3));
+        assert_eq!(t["analysis"]["gamma_k"].as_float(), Some(5.0));
+        assert_eq!(t["analysis"]["mass"].as_str(), Some("lumped"));
+        assert!(apply(&mut t, "body.7.basis", "gimp").is_err());
+        assert_eq!(Vary::parse("size=[1.0, 2.0],[3.0, 4.0]").unwrap().values.len(), 2);
+    }
+}

@@ -1,0 +1,198 @@
+//! `mpmlab sweep` end to end: the CSV, observed rates, restart, failed runs
+//! as rows, emitted jobs collected, and the SVG charts read back.
+
+mod common;
+use common::temp_path;
+use mpmlab::sweep::{from_csv, rates, RunResult};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn mpmlab(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn table(dir: &Path) -> Vec<RunResult> {
+    from_csv(&std::fs::read_to_string(dir.join("sweep.csv")).unwrap())
+}
+
+fn error(r: &RunResult, name: &str) -> f64 {
+    r.errors.iter().find(|e| e.0 == name).unwrap().1
+}
+
+/// Count `needle` in `hay`.
+fn count(hay: &str, needle: &str) -> usize {
+    hay.matches(needle).count()
+}
+
+fn column_sweep(dir: &Path, jobs: &str) -> (i32, String, String) {
+    mpmlab(&[
+        "sweep",
+        "scenarios/column-small-strain.toml",
+        "--vary",
+        "h=1.0,0.5,0.25",
+        "--vary",
+        "ppc=2",
+        "--jobs",
+        jobs,
+        "--out",
+        dir.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn small_sweep_table_rates_restart_and_charts() {
+    let dir: PathBuf = temp_path("sweep", "d");
+    let (code, out, err) = column_sweep(&dir, "2");
+    assert_eq!(code, 0, "{out}{err}");
+    let rows = table(&dir);
+    assert_eq!(rows.len(), 3, "{out}");
+    // Stable column names: id, the settings, the fixed columns, the errors.
+    let header = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
+    let header = header.lines().next().unwrap();
+    assert!(
+        header.starts_with("id,set:h,set:ppc,completed,steps_done,steps_total,failed_step,failure,wall_s,assembly_s,factorisation_s,solve_s,condition_s,unknowns,iterations,peak_rss_kb,condition,error:"),
+        "{header}"
+    );
+    // Values: the G (31) error of the confined column is exactly h/(4H)
+    // (tests/column.rs): 2.5e-2, 1.25e-2, 6.25e-3 for H = 10 m.
+    for (r, e) in rows.iter().zip([2.5e-2, 1.25e-2, 6.25e-3]) {
+        assert!(r.completed && r.failure.is_empty(), "{r:?}");
+        assert!((error(r, "syy_normalised") / e - 1.0).abs() < 1e-9, "{r:?}");
+        assert!(r.wall_s > 0.0 && r.unknowns > 0 && r.iterations == 1);
+    }
+    assert_eq!(
+        rows[0].settings,
+        vec![("h".into(), "1.0".into()), ("ppc".into(), "2".into())]
+    );
+    // Observed rates between successive refinements: exactly first order.
+    let r: Vec<f64> = rates(&rows, "h")
+        .into_iter()
+        .filter(|x| x.3 == "syy_normalised")
+        .map(|x| x.4)
+        .collect();
+    assert_eq!(r.len(), 2);
+    assert!(r.iter().all(|x| (x - 1.0).abs() < 1e-9), "{r:?}");
+    assert!(out.contains("observed rates") && out.contains("Pareto front"), "{out}");
+
+    // Restart: nothing is run again; the results are untouched.
+    let result = dir.join("results").join("h=0.5_ppc=2.csv");
+    let before = std::fs::read_to_string(&result).unwrap();
+    let (code, out, _) = column_sweep(&dir, "1");
+    assert_eq!(code, 0);
+    assert!(out.contains("3 runs, 3 already done"), "{out}");
+    assert_eq!(std::fs::read_to_string(&result).unwrap(), before);
+    assert_eq!(table(&dir).len(), 3);
+
+    // Charts: one circle per completed run in the scatter series, one line
+    // per group against h, one cell per run in the stability map.
+    let svg = std::fs::read_to_string(dir.join("charts/error_vs_time.svg")).unwrap();
+    let runs = svg.split(r#"data-name="Pareto front""#).next().unwrap();
+    assert_eq!(count(runs, "<circle") - 1, 3, "three points plus the legend dot");
+    assert!(svg.contains(r#"data-name="Pareto front""#));
+    let svg = std::fs::read_to_string(dir.join("charts/error_vs_h.svg")).unwrap();
+    assert!(svg.contains("rate 1.00"), "{svg}");
+    assert_eq!(count(&svg, "<polyline"), 1);
+    let svg = std::fs::read_to_string(dir.join("charts/stability.svg")).unwrap();
+    assert_eq!(count(&svg, r#"data-completed="true""#), 3);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_failed_run_is_a_row_with_its_reason() {
+    let dir = temp_path("sweep-fail", "d");
+    let (code, out, err) = mpmlab(&[
+        "sweep",
+        "scenarios/patch-compression.toml",
+        "--vary",
+        "tolerance=1e-8,1e-30",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let rows = table(&dir);
+    assert_eq!(rows.len(), 2);
+    assert!(rows[0].completed);
+    let f = &rows[1];
+    assert!(!f.completed && f.failed_step == 1, "{f:?}");
+    assert!(f.failure.contains("above tolerance"), "{f:?}");
+    assert!(out.contains("fails at step 1"), "{out}");
+    let svg = std::fs::read_to_string(dir.join("charts/stability.svg")).unwrap();
+    assert_eq!(count(&svg, r#"data-completed="false""#), 1);
+    // A setting the scene rejects is a row too, not a crash of the sweep.
+    let (code, _, _) = mpmlab(&[
+        "sweep",
+        "scenarios/patch-compression.toml",
+        "--vary",
+        "h=0.7",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0);
+    let bad = table(&dir).into_iter().find(|r| r.id == "h=0.7").unwrap();
+    assert!(
+        bad.failure.starts_with("bad scene") && bad.failure.contains("grid.size"),
+        "{bad:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn emitted_jobs_run_anywhere_and_are_collected() {
+    let dir = temp_path("sweep-emit", "d");
+    let (code, out, err) = mpmlab(&[
+        "sweep",
+        "scenarios/column-small-strain.toml",
+        "--vary",
+        "h=1.0,0.5",
+        "--out",
+        dir.to_str().unwrap(),
+        "--emit-jobs",
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let jobs = std::fs::read_to_string(dir.join("jobs.txt")).unwrap();
+    assert_eq!(jobs.lines().count(), 2);
+    assert!(!dir.join("sweep.csv").exists(), "nothing ran yet");
+    // What a scheduler would do: run each line in a shell, anywhere.
+    for line in jobs.lines() {
+        let s = Command::new("sh")
+            .arg("-c")
+            .arg(line)
+            .current_dir("/")
+            .status()
+            .unwrap();
+        assert!(s.success(), "{line}");
+    }
+    let (code, out, err) = mpmlab(&["sweep", "--collect", dir.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    let rows = table(&dir);
+    assert_eq!(
+        rows.iter().map(|r| r.id.as_str()).collect::<Vec<_>>(),
+        ["h=1.0", "h=0.5"]
+    );
+    assert!(rows.iter().all(|r| r.completed));
+    assert!((error(&rows[1], "syy_normalised") - 1.25e-2).abs() < 1e-12);
+    assert!(out.contains("h=0.5"), "{out}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_sweep_arguments_are_clear_errors() {
+    let (code, _, err) = mpmlab(&["sweep", "--preset", "nope"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("no preset `nope`") && err.contains("beam-stability"),
+        "{err}"
+    );
+    let (code, _, err) = mpmlab(&["sweep", "scenarios/patch-compression.toml", "--vary", "h"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("key=value1,value2"), "{err}");
+}
