@@ -2,23 +2,9 @@
 //! points and metric values match what the run reported.
 
 mod common;
-use common::{sim_with, temp_path};
+use common::{read_chunks, sim_with, temp_path};
 use mpmlab::record::Recorder;
-use rerun::external::re_log_encoding::DecoderApp;
-use rerun::log::{Chunk, LogMsg};
 use std::collections::BTreeMap;
-
-/// Every data chunk of the recording store in an `.rrd` file.
-fn read_chunks(path: &std::path::Path) -> Vec<Chunk> {
-    let file = std::fs::File::open(path).unwrap();
-    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
-    decoder
-        .filter_map(|msg| match msg.unwrap() {
-            LogMsg::ArrowMsg(store, arrow) if store.is_recording() => Some(Chunk::from_arrow_msg(&arrow).unwrap()),
-            _ => None,
-        })
-        .collect()
-}
 
 #[test]
 fn recording_holds_grid_points_and_metrics() {

@@ -103,6 +103,36 @@ fn small_sweep_table_rates_restart_and_charts() {
     assert_eq!(count(&svg, "<polyline"), 1);
     let svg = std::fs::read_to_string(dir.join("charts/stability.svg")).unwrap();
     assert_eq!(count(&svg, r#"data-completed="true""#), 3);
+
+    // The same in a rerun recording: per-run scalars on the `run` timeline
+    // and the charts as 2D entities.
+    let positions = rerun::Points2D::descriptor_positions().component;
+    let scalars = rerun::Scalars::descriptor_scalars().component;
+    let mut points = std::collections::BTreeMap::new();
+    let mut wall = Vec::new();
+    for chunk in common::read_chunks(&dir.join("sweep.rrd")) {
+        let e = chunk.entity_path().to_string();
+        for p in chunk.iter_slices::<[f32; 2]>(positions) {
+            *points.entry(e.clone()).or_insert(0) += p.len();
+        }
+        if e == "/runs/wall_s" {
+            wall.extend(chunk.iter_slices::<f64>(scalars).map(|v| v[0]));
+        }
+        points.entry(e).or_insert(0);
+    }
+    assert_eq!(points.get("/charts/error_vs_time/runs"), Some(&3), "{points:?}");
+    assert_eq!(points.get("/charts/stability"), Some(&3), "{points:?}");
+    assert_eq!(points.get("/charts/error_vs_h/ppc_2/points"), Some(&3), "{points:?}");
+    assert!(points.contains_key("/sweep/summary") && points.contains_key("/charts/error_vs_time/pareto"));
+    let mut expected: Vec<f64> = rows.iter().map(|r| r.wall_s).collect();
+    let mut got = wall.clone();
+    expected.sort_by(f64::total_cmp);
+    got.sort_by(f64::total_cmp);
+    // The CSV holds the times with six significant digits (%e formatting).
+    assert_eq!(got.len(), 3);
+    for (a, b) in got.iter().zip(&expected) {
+        assert!((a / b - 1.0).abs() < 1e-5, "{got:?} {expected:?}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -33,6 +33,8 @@
 //!
 //! The engine knows nothing of this module: it reads reports and state.
 
+pub mod sweep;
+
 use crate::colormap;
 use crate::field::Field;
 use crate::simulation::{Simulation, StepFailure, StepReport};

@@ -125,10 +125,13 @@ pub fn finish(folder: &Folder, title: &str) -> Result<String, String> {
     std::fs::write(&p, to_csv(&results)).map_err(|e| io("cannot write", &p, e))?;
     let charts = draw(folder, title, &results)?;
     let mut s = summary(&results);
+    let rrd = folder.0.join("sweep.rrd");
+    crate::record::sweep::record_sweep(&rrd, &s, &results, h_key(&results).as_deref()).map_err(|e| e.to_string())?;
     let _ = writeln!(s, "table: {}", p.display());
     for c in charts {
         let _ = writeln!(s, "chart: {}", c.display());
     }
+    let _ = writeln!(s, "recording: {}  (replay: rerun {})", rrd.display(), rrd.display());
     Ok(s)
 }
 

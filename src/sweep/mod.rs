@@ -12,6 +12,7 @@
 //! | `sweep.csv` | every result, in run order: the table to read |
 //! | `jobs.txt` | with `--emit-jobs`: one command per run, for GNU parallel or a Slurm array |
 //! | `charts/*.svg` | error against wall time (Pareto front marked), error against h, stability map |
+//! | `sweep.rrd` | the same as a rerun recording ([`crate::record::sweep`]) |
 //!
 //! Runs whose result exists are not run again, so an interrupted sweep
 //! resumes, and results computed elsewhere are merged by `--collect`.

@@ -46,3 +46,18 @@ pub fn temp_path(stem: &str, ext: &str) -> PathBuf {
         .as_nanos();
     std::env::temp_dir().join(format!("mpmlab-{stem}-{}-{nanos}.{ext}", std::process::id()))
 }
+
+/// Every data chunk of the recording store in an `.rrd` file, decoded with
+/// rerun's own decoder.
+pub fn read_chunks(path: &std::path::Path) -> Vec<rerun::log::Chunk> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let file = std::fs::File::open(path).unwrap();
+    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
+    decoder
+        .filter_map(|msg| match msg.unwrap() {
+            LogMsg::ArrowMsg(store, arrow) if store.is_recording() => Some(Chunk::from_arrow_msg(&arrow).unwrap()),
+            _ => None,
+        })
+        .collect()
+}
