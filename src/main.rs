@@ -92,6 +92,9 @@ enum Cmd {
         /// Do not record.
         #[arg(long, conflicts_with = "record")]
         no_record: bool,
+        /// Show a sweep folder instead (table, error against time and h).
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record"])]
+        sweep: Option<PathBuf>,
     },
 }
 
@@ -120,10 +123,12 @@ fn main() -> ExitCode {
             collect,
         }),
         Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
+        Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
         Some(Cmd::Tui {
             scene,
             record,
             no_record,
+            sweep: None,
         }) => tui(scene.as_deref(), record, no_record),
         None => tui(None, None, false),
     };
@@ -525,6 +530,19 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
     }
     driver::execute(&folder, &exe, &todo, a.jobs, &|line| out!("{line}"));
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `mpmlab tui --sweep DIR`: the sweep view.
+fn sweep_view(dir: &Path) -> Result<ExitCode> {
+    if !dir.join("runs.txt").exists() && !dir.join("sweep.csv").exists() {
+        anyhow::bail!("{} is not a sweep folder (no runs.txt or sweep.csv)", dir.display());
+    }
+    let folder = mpmlab::sweep::Folder(dir.to_path_buf());
+    let title = dir
+        .file_name()
+        .map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
+    mpmlab::tui::sweep::run(&folder, &title).context("terminal")?;
     Ok(ExitCode::SUCCESS)
 }
 

@@ -176,3 +176,58 @@ fn dynamics_screen_shows_time_energies_and_runs_on() {
     // gamma_M changes in decades and reaches the engine as a command.
     assert_eq!(app.apply(Action::LowerGammaM), Some(Command::SetGammaM(25.0)));
 }
+
+#[test]
+fn sweep_view_shows_runs_and_charts() {
+    use mpmlab::sweep::RunResult;
+    use mpmlab::tui::sweep::{draw as draw_sweep, SweepView};
+    // Three refinements of a first-order method and one failed run.
+    let run = |h: f64, e: f64, t: f64, ok: bool| RunResult {
+        id: format!("h={h}"),
+        settings: vec![("h".into(), h.to_string())],
+        completed: ok,
+        failed_step: if ok { 0 } else { 3 },
+        failure: if ok {
+            String::new()
+        } else {
+            "step 3 failed: singular".into()
+        },
+        wall_s: t,
+        errors: vec![("stress_l2".into(), e)],
+        condition: f64::NAN,
+        ..Default::default()
+    };
+    let view = SweepView {
+        title: "demo".into(),
+        results: vec![
+            run(1.0, 1e-1, 1e-3, true),
+            run(0.5, 5e-2, 4e-3, true),
+            run(0.25, 2.5e-2, 1.6e-2, true),
+            run(0.125, f64::NAN, 1e-2, false),
+        ],
+        scroll: 0,
+    };
+    let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+    t.draw(|f| draw_sweep(f, &view)).unwrap();
+    let buf = t.backend().buffer().clone();
+    let lines: Vec<String> = (0..buf.area.height)
+        .map(|y| (0..buf.area.width).map(|x| buf[(x, y)].symbol().to_string()).collect())
+        .collect();
+    let all = lines.join("\n");
+    assert!(lines[0].contains("4 runs, 3 completed, 1 failed"), "{}", lines[0]);
+    assert!(all.contains("fails at 3") && all.contains("h=0.25"), "{all}");
+    assert!(all.contains("stress_l2 against wall time"), "{all}");
+    // The observed rate of the one group, from its end points: exactly 1.
+    assert!(all.contains("rate 1.00"), "{all}");
+    // Both charts are drawn (braille or dot markers right of the table).
+    let marks: usize = lines[1..29]
+        .iter()
+        .map(|l| {
+            l.chars()
+                .skip(50)
+                .filter(|c| ('\u{2801}'..='\u{28ff}').contains(c) || *c == '•')
+                .count()
+        })
+        .sum();
+    assert!(marks > 5, "{all}");
+}

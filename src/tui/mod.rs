@@ -8,6 +8,7 @@
 
 pub mod app;
 pub mod draw;
+pub mod sweep;
 
 use crate::field::Field;
 use crate::record::Recorder;

@@ -1,0 +1,274 @@
+//! The sweep view (`mpmlab tui --sweep DIR`): a finished or running
+//! sweep's table, error against wall time with the Pareto front, error
+//! against h, and which runs completed. State, pure drawing, and a small
+//! event loop (arrows/jk scroll, r reloads, q or Esc quits).
+
+use crate::sweep::{pareto_front, RunResult};
+use ratatui::layout::{Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Axis, Block, Borders, Cell, Chart, Dataset, GraphType, LegendPosition, Paragraph, Row, Table};
+use ratatui::Frame;
+
+/// What the sweep view shows.
+pub struct SweepView {
+    pub title: String,
+    pub results: Vec<RunResult>,
+    /// First table row shown.
+    pub scroll: usize,
+}
+
+/// Log10 of the positive finite values, else `None`.
+fn lg(v: f64) -> Option<f64> {
+    (v > 0.0 && v.is_finite()).then(|| v.log10())
+}
+
+/// Bounds with a little margin, and decade labels.
+fn axis(values: &[f64]) -> ([f64; 2], Vec<String>) {
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    let (lo, hi) = if lo.is_finite() {
+        (lo.floor(), hi.ceil().max(lo.floor() + 1.0))
+    } else {
+        (0.0, 1.0)
+    };
+    ([lo, hi], vec![format!("1e{}", lo as i32), format!("1e{}", hi as i32)])
+}
+
+impl SweepView {
+    fn h_key(&self) -> Option<&'static str> {
+        ["h", "grid.h"]
+            .into_iter()
+            .find(|k| self.results.iter().any(|r| r.setting(k).is_some()))
+    }
+
+    fn error_name(&self) -> String {
+        self.results
+            .iter()
+            .find_map(|r| r.errors.first().map(|e| e.0.clone()))
+            .unwrap_or_else(|| "error".into())
+    }
+}
+
+/// Draw the whole sweep screen.
+pub fn draw(frame: &mut Frame, v: &SweepView) {
+    let [title, body, status] =
+        Layout::vertical([Constraint::Length(1), Constraint::Min(5), Constraint::Length(1)]).areas(frame.area());
+    let done = v.results.iter().filter(|r| r.completed).count();
+    frame.render_widget(
+        Paragraph::new(Line::from(vec![
+            Span::styled(
+                " mpmlab sweep ",
+                Style::new().add_modifier(Modifier::BOLD).bg(Color::Blue),
+            ),
+            Span::raw(format!(
+                " {}  | {} runs, {} completed, {} failed",
+                v.title,
+                v.results.len(),
+                done,
+                v.results.len() - done
+            )),
+        ])),
+        title,
+    );
+    let [left, right] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
+    draw_table(frame, v, left);
+    let [top, bottom] = Layout::vertical([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(right);
+    draw_time_chart(frame, v, top);
+    draw_h_chart(frame, v, bottom);
+    frame.render_widget(
+        Paragraph::new(" up/down scroll · r reload · q quit").style(Style::new().fg(Color::Gray)),
+        status,
+    );
+}
+
+fn draw_table(frame: &mut Frame, v: &SweepView, area: Rect) {
+    let err = v.error_name();
+    let header = Row::new(vec!["run".to_string(), "outcome".into(), "wall s".into(), err])
+        .style(Style::new().add_modifier(Modifier::BOLD));
+    let rows = v.results.iter().skip(v.scroll).map(|r| {
+        let (outcome, color) = if r.completed {
+            ("completed".to_string(), Color::Green)
+        } else if r.failed_step > 0 {
+            (format!("fails at {}", r.failed_step), Color::Red)
+        } else {
+            ("invalid".to_string(), Color::Red)
+        };
+        Row::new(vec![
+            Cell::from(r.id.clone()),
+            Cell::from(outcome).style(Style::new().fg(color)),
+            Cell::from(format!("{:.3}", r.wall_s)),
+            Cell::from(r.error().map_or("-".into(), |e| format!("{e:.3e}"))),
+        ])
+    });
+    let widths = [
+        Constraint::Percentage(36),
+        Constraint::Percentage(26),
+        Constraint::Percentage(14),
+        Constraint::Percentage(24),
+    ];
+    frame.render_widget(
+        Table::new(rows, widths).header(header).block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(" runs (green: completed) "),
+        ),
+        area,
+    );
+}
+
+fn draw_time_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
+    let done: Vec<&RunResult> = v.results.iter().filter(|r| r.completed).collect();
+    let pts: Vec<(f64, f64)> = done.iter().map(|r| (r.cost(), r.error().unwrap_or(f64::NAN))).collect();
+    let all: Vec<(f64, f64)> = pts.iter().filter_map(|p| Some((lg(p.0)?, lg(p.1)?))).collect();
+    let mut front = pareto_front(&pts);
+    front.sort_by(|&a, &b| pts[a].0.partial_cmp(&pts[b].0).unwrap());
+    let line: Vec<(f64, f64)> = front
+        .iter()
+        .filter_map(|&i| Some((lg(pts[i].0)?, lg(pts[i].1)?)))
+        .collect();
+    let (xb, xl) = axis(&all.iter().map(|p| p.0).collect::<Vec<_>>());
+    let (yb, yl) = axis(&all.iter().map(|p| p.1).collect::<Vec<_>>());
+    let data = [
+        Dataset::default()
+            .name("runs")
+            .marker(Marker::Dot)
+            .graph_type(GraphType::Scatter)
+            .style(Style::new().fg(Color::Cyan))
+            .data(&all),
+        Dataset::default()
+            .name("Pareto front")
+            .marker(Marker::Braille)
+            .graph_type(GraphType::Line)
+            .style(Style::new().fg(Color::Red))
+            .data(&line),
+    ];
+    frame.render_widget(
+        Chart::new(data.to_vec())
+            .block(
+                Block::default()
+                    .borders(Borders::ALL)
+                    .title(format!(" {} against wall time (log-log) ", v.error_name())),
+            )
+            .x_axis(Axis::default().bounds(xb).labels(xl))
+            .y_axis(Axis::default().bounds(yb).labels(yl))
+            .legend_position(Some(LegendPosition::TopRight))
+            .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1))),
+        area,
+    );
+}
+
+fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
+    let block = Block::default()
+        .borders(Borders::ALL)
+        .title(format!(" {} against h (log-log) ", v.error_name()));
+    let Some(h) = v.h_key() else {
+        frame.render_widget(Paragraph::new("h is not varied in this sweep").block(block), area);
+        return;
+    };
+    let mut groups: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for r in v.results.iter().filter(|r| r.completed) {
+        let label: Vec<String> = r
+            .settings
+            .iter()
+            .filter(|(k, _)| k != h)
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        let label = if label.is_empty() {
+            "runs".into()
+        } else {
+            label.join(" ")
+        };
+        let Some(p) = (|| Some((lg(r.setting(h)?)?, lg(r.error()?)?)))() else {
+            continue;
+        };
+        match groups.iter_mut().find(|g| g.0 == label) {
+            Some(g) => g.1.push(p),
+            None => groups.push((label, vec![p])),
+        }
+    }
+    for g in &mut groups {
+        g.1.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+    }
+    let xs: Vec<f64> = groups.iter().flat_map(|g| g.1.iter().map(|p| p.0)).collect();
+    let ys: Vec<f64> = groups.iter().flat_map(|g| g.1.iter().map(|p| p.1)).collect();
+    let (xb, xl) = axis(&xs);
+    let (yb, yl) = axis(&ys);
+    let colors = [
+        Color::Cyan,
+        Color::Yellow,
+        Color::Magenta,
+        Color::Green,
+        Color::Blue,
+        Color::White,
+    ];
+    let data: Vec<Dataset> = groups
+        .iter()
+        .enumerate()
+        .map(|(k, (label, pts))| {
+            let rate = match (pts.first(), pts.last()) {
+                (Some(a), Some(b)) if b.0 != a.0 => format!(" (rate {:.2})", (b.1 - a.1) / (b.0 - a.0)),
+                _ => String::new(),
+            };
+            Dataset::default()
+                .name(format!("{label}{rate}"))
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(colors[k % colors.len()]))
+                .data(pts)
+        })
+        .collect();
+    frame.render_widget(
+        Chart::new(data)
+            .block(block)
+            .x_axis(Axis::default().bounds(xb).labels(xl))
+            .y_axis(Axis::default().bounds(yb).labels(yl))
+            .legend_position(Some(LegendPosition::TopRight))
+            .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1))),
+        area,
+    );
+}
+
+/// Show a sweep folder until the user quits; `r` re-reads it (a sweep
+/// running elsewhere fills in).
+pub fn run(folder: &crate::sweep::Folder, title: &str) -> std::io::Result<()> {
+    use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind};
+    let load = || {
+        let mut all = folder.collect();
+        let order: Vec<String> = std::fs::read_to_string(folder.0.join("runs.txt"))
+            .map(|t| t.lines().map(str::to_string).collect())
+            .unwrap_or_default();
+        let mut r: Vec<RunResult> = order.iter().filter_map(|id| all.remove(id)).collect();
+        r.extend(all.into_values());
+        r
+    };
+    let mut view = SweepView {
+        title: title.to_string(),
+        results: load(),
+        scroll: 0,
+    };
+    let mut terminal = ratatui::init();
+    let result = (|| -> std::io::Result<()> {
+        loop {
+            terminal.draw(|f| draw(f, &view))?;
+            if let Event::Key(k) = event::read()? {
+                if k.kind != KeyEventKind::Press {
+                    continue;
+                }
+                match k.code {
+                    KeyCode::Char('q') | KeyCode::Esc => return Ok(()),
+                    KeyCode::Down | KeyCode::Char('j') => {
+                        view.scroll = (view.scroll + 1).min(view.results.len().saturating_sub(1))
+                    }
+                    KeyCode::Up | KeyCode::Char('k') => view.scroll = view.scroll.saturating_sub(1),
+                    KeyCode::Char('r') => view.results = load(),
+                    _ => {}
+                }
+            }
+        }
+    })();
+    ratatui::restore();
+    result
+}
