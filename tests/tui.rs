@@ -217,6 +217,7 @@ fn sweep_view_shows_runs_and_charts() {
     assert!(lines[0].contains("4 runs, 3 completed, 1 failed"), "{}", lines[0]);
     assert!(all.contains("fails at 3") && all.contains("h=0.25"), "{all}");
     assert!(all.contains("stress_l2 against wall time"), "{all}");
+    assert!(all.contains("stability map") && all.contains("FAIL"), "{all}");
     // The observed rate of the one group, from its end points: exactly 1.
     assert!(all.contains("rate 1.00"), "{all}");
     // Both charts are drawn (braille or dot markers right of the table).

@@ -74,7 +74,9 @@ pub fn draw(frame: &mut Frame, v: &SweepView) {
         title,
     );
     let [left, right] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
-    draw_table(frame, v, left);
+    let [table, map] = Layout::vertical([Constraint::Min(5), Constraint::Length(stability_height(v))]).areas(left);
+    draw_table(frame, v, table);
+    draw_stability(frame, v, map);
     let [top, bottom] = Layout::vertical([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(right);
     draw_time_chart(frame, v, top);
     draw_h_chart(frame, v, bottom);
@@ -115,6 +117,66 @@ fn draw_table(frame: &mut Frame, v: &SweepView, area: Rect) {
                 .borders(Borders::ALL)
                 .title(" runs (green: completed) "),
         ),
+        area,
+    );
+}
+
+/// Rows (all settings but the last) and columns (the last setting) of the
+/// stability map, and each run's cell.
+fn stability_grid(v: &SweepView) -> (Vec<String>, Vec<String>, Vec<(usize, usize, bool)>) {
+    let (mut rows, mut cols, mut cells) = (Vec::new(), Vec::new(), Vec::new());
+    for r in &v.results {
+        let n = r.settings.len();
+        let row: Vec<String> = r.settings[..n.saturating_sub(1)]
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        let (row, col) = (
+            row.join(" "),
+            r.settings.last().map(|(k, v)| format!("{k}={v}")).unwrap_or_default(),
+        );
+        if !rows.contains(&row) {
+            rows.push(row.clone());
+        }
+        if !cols.contains(&col) {
+            cols.push(col.clone());
+        }
+        let i = rows.iter().position(|x| *x == row).unwrap_or(0);
+        let j = cols.iter().position(|x| *x == col).unwrap_or(0);
+        cells.push((i, j, r.completed));
+    }
+    (rows, cols, cells)
+}
+
+fn stability_height(v: &SweepView) -> u16 {
+    (stability_grid(v).0.len() as u16 + 3).min(16)
+}
+
+/// Which settings completed: a row per combination of the other settings,
+/// a column per value of the last one; green completed, red failed.
+fn draw_stability(frame: &mut Frame, v: &SweepView, area: Rect) {
+    let (rows, cols, cells) = stability_grid(v);
+    let width = cols.iter().map(|c| c.len()).max().unwrap_or(1).max(4) + 1;
+    let label = rows.iter().map(|r| r.len()).max().unwrap_or(0).max(4) + 1;
+    let mut lines = vec![Line::raw(format!(
+        "{:<label$}{}",
+        "",
+        cols.iter().map(|c| format!("{c:<width$}")).collect::<String>()
+    ))];
+    for (i, r) in rows.iter().enumerate() {
+        let mut spans = vec![Span::raw(format!("{:<label$}", if r.is_empty() { "runs" } else { r }))];
+        for j in 0..cols.len() {
+            let (text, color) = match cells.iter().find(|c| c.0 == i && c.1 == j) {
+                Some((_, _, true)) => ("ok", Color::Green),
+                Some((_, _, false)) => ("FAIL", Color::Red),
+                None => ("-", Color::Gray),
+            };
+            spans.push(Span::styled(format!("{text:<width$}"), Style::new().fg(color)));
+        }
+        lines.push(Line::from(spans));
+    }
+    frame.render_widget(
+        Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(" stability map ")),
         area,
     );
 }
