@@ -121,9 +121,15 @@ fn draw_table(frame: &mut Frame, v: &SweepView, area: Rect) {
     );
 }
 
-/// Rows (all settings but the last) and columns (the last setting) of the
-/// stability map, and each run's cell.
-fn stability_grid(v: &SweepView) -> (Vec<String>, Vec<String>, Vec<(usize, usize, bool)>) {
+/// The stability map's row labels (all settings but the last), column
+/// labels (the last setting) and each run's `(row, column, completed)`.
+struct Grid {
+    rows: Vec<String>,
+    cols: Vec<String>,
+    cells: Vec<(usize, usize, bool)>,
+}
+
+fn stability_grid(v: &SweepView) -> Grid {
     let (mut rows, mut cols, mut cells) = (Vec::new(), Vec::new(), Vec::new());
     for r in &v.results {
         let n = r.settings.len();
@@ -145,17 +151,17 @@ fn stability_grid(v: &SweepView) -> (Vec<String>, Vec<String>, Vec<(usize, usize
         let j = cols.iter().position(|x| *x == col).unwrap_or(0);
         cells.push((i, j, r.completed));
     }
-    (rows, cols, cells)
+    Grid { rows, cols, cells }
 }
 
 fn stability_height(v: &SweepView) -> u16 {
-    (stability_grid(v).0.len() as u16 + 3).min(16)
+    (stability_grid(v).rows.len() as u16 + 3).min(16)
 }
 
 /// Which settings completed: a row per combination of the other settings,
 /// a column per value of the last one; green completed, red failed.
 fn draw_stability(frame: &mut Frame, v: &SweepView, area: Rect) {
-    let (rows, cols, cells) = stability_grid(v);
+    let Grid { rows, cols, cells } = stability_grid(v);
     let width = cols.iter().map(|c| c.len()).max().unwrap_or(1).max(4) + 1;
     let label = rows.iter().map(|r| r.len()).max().unwrap_or(0).max(4) + 1;
     let mut lines = vec![Line::raw(format!(
