@@ -83,6 +83,8 @@ enum Cmd {
         #[arg(long)]
         result: PathBuf,
     },
+    /// Open a recording in the rerun viewer (or say how to install it).
+    Replay { recording: PathBuf },
     /// Step a scene interactively in the terminal.
     Tui {
         scene: Option<PathBuf>,
@@ -123,6 +125,7 @@ fn main() -> ExitCode {
             collect,
         }),
         Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
+        Some(Cmd::Replay { recording }) => replay(&recording),
         Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
         Some(Cmd::Tui {
             scene,
@@ -531,6 +534,36 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
     driver::execute(&folder, &exe, &todo, a.jobs, &|line| out!("{line}"));
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
     Ok(ExitCode::SUCCESS)
+}
+
+/// `mpmlab replay FILE`: the rerun viewer on a recording, if installed;
+/// otherwise the exact command that installs the matching viewer (exit 1).
+fn replay(file: &Path) -> Result<ExitCode> {
+    use mpmlab::record::RERUN_VERSION;
+    if !file.is_file() {
+        anyhow::bail!("{}: no such recording", file.display());
+    }
+    let viewer = std::env::var_os("PATH").and_then(|paths| {
+        std::env::split_paths(&paths)
+            .map(|d| d.join("rerun"))
+            .find(|p| p.is_file())
+    });
+    let Some(viewer) = viewer else {
+        out!(
+            "the rerun viewer is not installed; install the version that reads these recordings and open it with:\n  pip install rerun-sdk=={RERUN_VERSION}\n  rerun {}",
+            file.display()
+        );
+        return Ok(ExitCode::from(1));
+    };
+    let status = std::process::Command::new(&viewer)
+        .arg(file)
+        .status()
+        .with_context(|| format!("cannot start {}", viewer.display()))?;
+    Ok(if status.success() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }
 
 /// `mpmlab tui --sweep DIR`: the sweep view.

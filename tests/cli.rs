@@ -141,3 +141,47 @@ fn unwritable_recording_is_a_clear_error() {
         "{err}"
     );
 }
+
+#[test]
+fn replay_opens_the_viewer_or_says_how_to_install_it() {
+    let rrd = temp_path("replay", "rrd");
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--quiet",
+        "--record",
+        rrd.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let run = |path: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+            .args(["replay", rrd.to_str().unwrap()])
+            .env("PATH", path)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+        )
+    };
+    // No viewer on PATH: the exact install command for the matching version.
+    let empty = temp_path("nopath", "d");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (code, out) = run(empty.to_str().unwrap());
+    assert_eq!(code, 1);
+    assert!(
+        out.contains("pip install rerun-sdk==0.36.3") && out.contains(rrd.to_str().unwrap()),
+        "{out}"
+    );
+    // A viewer on PATH is started with the file.
+    let fake = empty.join("rerun");
+    let log = empty.join("args");
+    std::fs::write(&fake, format!("#!/bin/sh\necho \"$@\" > '{}'\n", log.display())).unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let (code, _) = run(&format!("{}:/usr/bin:/bin", empty.display()));
+    assert_eq!(code, 0);
+    assert_eq!(std::fs::read_to_string(&log).unwrap().trim(), rrd.to_str().unwrap());
+    let _ = std::fs::remove_dir_all(&empty);
+    let _ = std::fs::remove_file(&rrd);
+}

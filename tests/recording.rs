@@ -158,3 +158,32 @@ fn dynamic_run_records_energies_on_the_time_timeline() {
     // Condition steps 1, 2 and 4 (every 2nd step and the first).
     assert_eq!(on_time["/metrics/condition/mass_lumped"].len(), 3);
 }
+
+#[test]
+fn recording_carries_a_default_layout() {
+    // A blueprint store (rerun's stored layout) with its views, activated:
+    // the viewer opens on the scene with the metrics beside it.
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let sim = sim_with("column-small-strain", |_| {});
+    let text = std::fs::read_to_string(common::scene_path("column-small-strain")).unwrap();
+    let path = temp_path("rec-layout", "rrd");
+    Recorder::create(&path, &text, &sim, true).unwrap().finish().unwrap();
+    let file = std::fs::File::open(&path).unwrap();
+    let (mut blueprint_entities, mut activated) = (Vec::new(), false);
+    for msg in DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap() {
+        match msg.unwrap() {
+            LogMsg::ArrowMsg(store, arrow) if !store.is_recording() => {
+                blueprint_entities.push(Chunk::from_arrow_msg(&arrow).unwrap().entity_path().to_string());
+            }
+            LogMsg::BlueprintActivationCommand(c) => activated |= c.make_active,
+            _ => {}
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    assert!(activated, "no activation command");
+    let views = blueprint_entities.iter().filter(|e| e.starts_with("/view/")).count();
+    // scene, residual, condition, errors, events.
+    assert!(views >= 5, "{blueprint_entities:?}");
+    assert!(blueprint_entities.iter().any(|e| e.starts_with("/container/")));
+}

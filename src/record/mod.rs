@@ -31,6 +31,9 @@
 //! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, failures, end) | as they happen |
 //!
+//! The file also holds a blueprint (rerun's stored layout, [`layout`]) so
+//! the viewer opens on the scene with the metrics beside it.
+//!
 //! The engine knows nothing of this module: it reads reports and state.
 
 pub mod sweep;
@@ -57,6 +60,36 @@ fn cell_box(g: &crate::grid::Grid, c: usize) -> Vec<[f32; 2]> {
     vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
 }
 
+/// The viewer's default layout (a blueprint stored in the file): the 2D
+/// scene (points, grid, boundaries) on the left; on the right the Newton
+/// residuals (or, for explicit dynamics, the energies), the condition
+/// numbers, the errors and the event log.
+fn layout(dynamic: bool) -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::{
+        Blueprint, ContainerLike, Horizontal, Spatial2DView, TextLogView, TimeSeriesView, Vertical,
+    };
+    let scene = Spatial2DView::new("scene").with_origin("/").with_contents([
+        "/points",
+        "/grid/**",
+        "/boundaries/**",
+        "/ibm/**",
+    ]);
+    let first = if dynamic {
+        TimeSeriesView::new("energy (J)").with_origin("/metrics/energy")
+    } else {
+        TimeSeriesView::new("log10 Newton residual").with_origin("/metrics/log10/residual")
+    };
+    let right: Vec<ContainerLike> = vec![
+        first.into(),
+        TimeSeriesView::new("log10 condition numbers")
+            .with_origin("/metrics/log10/condition")
+            .into(),
+        TimeSeriesView::new("errors").with_origin("/metrics/error").into(),
+        TextLogView::new("events").with_origin("/events").into(),
+    ];
+    Blueprint::new(Horizontal::new([scene.into(), Vertical::new(right).into()]).with_column_shares([0.55, 0.45]))
+}
+
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
@@ -64,6 +97,10 @@ pub struct Recorder {
     iteration: i64,
     field: Field,
 }
+
+/// The rerun version the recordings are written with; viewers read their
+/// own and the previous minor version only.
+pub const RERUN_VERSION: &str = "0.36.3";
 
 /// Application id under which mpmlab recordings appear in the viewer.
 pub const APP_ID: &str = "mpmlab";
@@ -104,6 +141,7 @@ impl Recorder {
             iteration: 0,
             field: Field::SigmaYy,
         };
+        r.check(layout(sim.time().is_some()).send(&r.rec, rerun::blueprint::BlueprintActivation::default()))?;
         r.log_static(scene_text, sim)?;
         r.log_state(sim)?;
         r.event(
