@@ -100,7 +100,8 @@ enum Cmd {
     },
 }
 
-/// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed.
+/// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed,
+/// 130 interrupted (Ctrl-C or SIGTERM; the recording is closed cleanly).
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -337,8 +338,24 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
     let mut code = ExitCode::SUCCESS;
     let mut last: Option<StepReport> = None;
     let mut total_time = 0.0;
+    // Ctrl-C or SIGTERM: stop after the current step and close the
+    // recording; a second Ctrl-C ends the process at once.
+    let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        let _ = signal_hook::flag::register_conditional_shutdown(sig, 130, interrupted.clone());
+        let _ = signal_hook::flag::register(sig, interrupted.clone());
+    }
     while !sim.finished() {
-        match sim.step() {
+        if interrupted.load(std::sync::atomic::Ordering::SeqCst) {
+            let text = format!("interrupted after step {}: the run stops here", sim.step_index());
+            eprintln!("{text}");
+            if let Some(rec) = recorder.as_mut() {
+                let _ = rec.event(&text, "WARN");
+            }
+            code = ExitCode::from(130);
+            break;
+        }
+        match sim.step_guarded() {
             Ok(r) => {
                 if !quiet {
                     match (&r.dynamics, last.is_none()) {

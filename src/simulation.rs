@@ -142,6 +142,9 @@ pub enum StepFailure {
     },
     /// An explicit step blew up: energy or grid velocities beyond bounds.
     Diverged { step: usize, reason: String },
+    /// The engine panicked (a bug): caught by [`Simulation::step_guarded`];
+    /// the state is the last good step.
+    Internal { step: usize, message: String },
 }
 
 impl StepFailure {
@@ -153,7 +156,8 @@ impl StepFailure {
             | StepFailure::NonFinite { step, .. }
             | StepFailure::Boundary { step, .. }
             | StepFailure::LeftGrid { step, .. }
-            | StepFailure::Diverged { step, .. } => *step,
+            | StepFailure::Diverged { step, .. }
+            | StepFailure::Internal { step, .. } => *step,
         }
     }
 
@@ -193,6 +197,10 @@ impl fmt::Display for StepFailure {
                 position[1]
             ),
             StepFailure::Diverged { step, reason } => write!(f, "step {step} failed: diverged: {reason}"),
+            StepFailure::Internal { step, message } => write!(
+                f,
+                "step {step} failed: internal error (a bug in mpmlab; please report it with the scene): {message}"
+            ),
             StepFailure::Boundary { step, name, reason } => {
                 write!(f, "step {step} failed: boundary `{name}`: {reason}")
             }
@@ -368,6 +376,25 @@ impl Simulation {
 
     pub fn restore(&mut self, snapshot: &Snapshot) {
         self.state = snapshot.0.clone();
+    }
+
+    /// [`Simulation::step`], with a panic inside the engine turned into
+    /// [`StepFailure::Internal`] so that observers (TUI, recordings) can
+    /// report it and close cleanly. A step commits only at its end, so the
+    /// state stays at the last good step.
+    pub fn step_guarded(&mut self) -> Result<StepReport, StepFailure> {
+        let step = self.state.step + 1;
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.step())) {
+            Ok(r) => r,
+            Err(e) => Err(StepFailure::Internal {
+                step,
+                message: e
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| e.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "panic".into()),
+            }),
+        }
     }
 
     /// Take one load step.

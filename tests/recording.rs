@@ -187,3 +187,51 @@ fn recording_carries_a_default_layout() {
     assert!(views >= 5, "{blueprint_entities:?}");
     assert!(blueprint_entities.iter().any(|e| e.starts_with("/container/")));
 }
+
+#[test]
+fn an_interrupted_run_leaves_a_readable_recording() {
+    // Ctrl-C (SIGINT) during `mpmlab run --record`: the run stops after its
+    // current step with exit code 130 and the file holds every step so far
+    // plus the interruption event.
+    let path = temp_path("rec-interrupted", "rrd");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+        .args(["run", "scenarios/ghost-collision-plastic.toml", "--quiet", "--record"])
+        .arg(&path)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Let it take some steps (the scene has 1000 of about 6 ms each).
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted after step"), "{err}");
+    let positions = rerun::Points2D::descriptor_positions().component;
+    let step_tl: rerun::TimelineName = "step".into();
+    let (mut steps, mut events) = (std::collections::BTreeSet::new(), 0);
+    for chunk in read_chunks(&path) {
+        let e = chunk.entity_path().to_string();
+        if e == "/points" {
+            for ((t, _), _) in chunk
+                .iter_component_indices(step_tl, positions)
+                .zip(chunk.iter_slices::<[f32; 2]>(positions))
+            {
+                steps.insert(t.as_i64());
+            }
+        }
+        if e == "/events" {
+            events += chunk.num_rows();
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    assert!(steps.len() > 10 && steps.len() < 1001, "{} steps recorded", steps.len());
+    // start, the interruption, and the end of the run.
+    assert!(events >= 3, "{events} events");
+}

@@ -75,7 +75,7 @@ fn engine(
     };
     while let Ok(cmd) = commands.recv() {
         match cmd {
-            Command::Step => match sim.step() {
+            Command::Step => match sim.step_guarded() {
                 Ok(report) => {
                     if let Some(rec) = recorder.as_mut() {
                         let r = rec.log_step(&report, &sim);
@@ -146,7 +146,13 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
     let result = (|| -> std::io::Result<()> {
         while !app.quit {
             while let Ok(u) = up_rx.try_recv() {
+                // A caught engine panic has run ratatui's panic hook, which
+                // restored the terminal: take it back.
+                let reinit = matches!(&u, Update::Failed(crate::simulation::StepFailure::Internal { .. }));
                 app.update(u);
+                if reinit {
+                    terminal = ratatui::init();
+                }
             }
             if let Some(cmd) = app.pending() {
                 let _ = cmd_tx.send(cmd);
