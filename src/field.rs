@@ -9,14 +9,25 @@ pub enum Field {
     SigmaYy,
     SigmaXy,
     DisplacementMagnitude,
+    /// Plastic work dissipated per reference volume (J/m^3).
+    PlasticWork,
+    /// Speed `|v|` (explicit dynamics; m/s).
+    Speed,
+    /// Error against the scene's exact solution: `|u - u_exact|` where the
+    /// exact displacement is known, else `|s_yy - s_yy,exact|`; zero
+    /// without an exact solution.
+    Error,
 }
 
 impl Field {
-    pub const ALL: [Field; 4] = [
+    pub const ALL: [Field; 7] = [
         Field::SigmaYy,
         Field::SigmaXx,
         Field::SigmaXy,
         Field::DisplacementMagnitude,
+        Field::PlasticWork,
+        Field::Speed,
+        Field::Error,
     ];
 
     pub fn label(self) -> &'static str {
@@ -25,12 +36,18 @@ impl Field {
             Field::SigmaYy => "sigma_yy (Pa)",
             Field::SigmaXy => "sigma_xy (Pa)",
             Field::DisplacementMagnitude => "|u| (m)",
+            Field::PlasticWork => "plastic work (J/m^3)",
+            Field::Speed => "|v| (m/s)",
+            Field::Error => "error vs exact",
         }
     }
 
     /// The field's value at every point.
     pub fn values(self, sim: &Simulation) -> Vec<f64> {
         let pts = sim.points();
+        if self == Field::Error {
+            return error_values(sim);
+        }
         (0..pts.len())
             .map(|p| match self {
                 Field::SigmaXx => pts.stress[p][0],
@@ -40,7 +57,42 @@ impl Field {
                     let u = pts.displacement(p);
                     u[0].hypot(u[1])
                 }
+                Field::PlasticWork if pts.vol0[p] > 0.0 => pts.dissipation[p] / pts.vol0[p],
+                Field::PlasticWork => 0.0,
+                Field::Speed => pts.v[p][0].hypot(pts.v[p][1]),
+                Field::Error => 0.0,
             })
             .collect()
     }
+}
+
+/// Per point error against the exact solution at the current load factor.
+fn error_values(sim: &Simulation) -> Vec<f64> {
+    use crate::exact::ExactSolution;
+    let pts = sim.points();
+    let Some(exact) = &sim.model().exact else {
+        return vec![0.0; pts.len()];
+    };
+    let lambda = sim.load_factor();
+    (0..pts.len())
+        .map(|p| {
+            let u = pts.displacement(p);
+            let ue = match exact {
+                ExactSolution::FreeMotion { fields, duration } => {
+                    crate::exact::velocity_field(&fields[pts.body[p]], pts.x0[p]).map(|v| v * lambda * duration)
+                }
+                _ => exact.displacement(pts.x0[p]).map(|u| u * lambda),
+            };
+            let e = if ue.iter().all(|v| v.is_finite()) {
+                (u[0] - ue[0]).hypot(u[1] - ue[1])
+            } else {
+                (pts.stress[p][1] - lambda * exact.stress(pts.x0[p])[1]).abs()
+            };
+            if e.is_finite() {
+                e
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }

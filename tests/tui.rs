@@ -118,7 +118,7 @@ fn gamma_k_is_tuned_from_the_keyboard() {
     app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
     let all = screen(&app).join("\n");
     assert!(
-        all.contains("residual per iteration (log10)") && all.contains("1e-"),
+        all.contains("residual per iteration (log10") && all.contains("1e-"),
         "{all}"
     );
     assert!(!app.view.ghost_faces.is_empty());
@@ -231,4 +231,46 @@ fn sweep_view_shows_runs_and_charts() {
         })
         .sum();
     assert!(marks > 5, "{all}");
+}
+
+#[test]
+fn charts_fields_zoom_and_quit_confirmation() {
+    let mut sim = sim_with("column-small-strain", |_| {});
+    let mut app = App::new(&sim, None);
+    app.apply(Action::Step);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    // v cycles the chart: residual -> condition -> energy -> error.
+    app.apply(Action::NextChart);
+    assert!(screen(&app).join("\n").contains("condition number per step"));
+    app.apply(Action::NextChart);
+    assert!(screen(&app).join("\n").contains("energy per step"));
+    app.apply(Action::NextChart);
+    assert!(screen(&app).join("\n").contains("errors per step"));
+    // f reaches the error against the exact solution (column: |u - u_exact|).
+    for _ in 0..6 {
+        let Some(Command::SetField(f)) = app.apply(Action::NextField) else {
+            panic!()
+        };
+        app.update(Update::View(Box::new(View::of(&sim, f))));
+    }
+    assert_eq!(app.view.field, mpmlab::field::Field::Error);
+    assert!(app.view.values.iter().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(screen(&app).join("\n").contains("error vs exact"));
+    // Zoom and pan change the view; z fits again.
+    app.apply(Action::ZoomIn);
+    app.apply(Action::PanRight);
+    assert_eq!(app.zoom, 2.0);
+    assert!(app.pan[0] > 0.0);
+    assert!(screen(&app).join("\n").contains("zoom x2"));
+    app.apply(Action::ResetView);
+    assert_eq!((app.zoom, app.pan), (1.0, [0.0, 0.0]));
+    // q while a step runs asks first; Esc stays; q twice quits.
+    app.busy = true;
+    assert_eq!(app.apply(Action::Quit), None);
+    assert!(app.status.contains("q again quits"));
+    app.apply(Action::CloseOverlay);
+    assert_eq!(app.apply(Action::Quit), None);
+    assert_eq!(app.apply(Action::Quit), Some(Command::Quit));
+    assert!(app.quit);
 }

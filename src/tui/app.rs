@@ -109,6 +109,16 @@ pub enum Action {
     LowerGammaM,
     /// Step continuously until paused, finished or failed.
     RunPause,
+    /// Canvas zoom in / out (x2), pan by a fifth of the view, back to fit.
+    ZoomIn,
+    ZoomOut,
+    PanLeft,
+    PanRight,
+    PanUp,
+    PanDown,
+    ResetView,
+    /// Next chart: residuals, condition numbers, energies, errors.
+    NextChart,
     CloseOverlay,
     NextField,
     Quit,
@@ -126,6 +136,30 @@ pub enum Command {
     /// New ghost mass penalty `gamma_M` (from the next step).
     SetGammaM(f64),
     Quit,
+}
+
+/// What the chart panel shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChartKind {
+    /// Newton residual per iteration, the last steps overlaid (log10).
+    Residual,
+    /// Condition numbers per step (log10), with and without ghost.
+    Condition,
+    /// Energies per step (quasi-static) or against time (dynamics).
+    Energy,
+    /// Errors against the exact solution per step (log10).
+    Error,
+}
+
+impl ChartKind {
+    pub fn next(self) -> ChartKind {
+        match self {
+            ChartKind::Residual => ChartKind::Condition,
+            ChartKind::Condition => ChartKind::Energy,
+            ChartKind::Energy => ChartKind::Error,
+            ChartKind::Error => ChartKind::Residual,
+        }
+    }
 }
 
 /// The whole state of the interface.
@@ -156,6 +190,12 @@ pub struct App {
     pub running: bool,
     /// `gamma_M` to start from when raising it from 0 (rho/4 of the densest material).
     pub default_gamma_m: f64,
+    /// Canvas magnification (1: the whole grid) and view centre offset (m).
+    pub zoom: f64,
+    pub pan: [f64; 2],
+    pub chart: ChartKind,
+    /// `q` was pressed while a step runs: a second `q` quits.
+    pub confirm_quit: bool,
 }
 
 impl App {
@@ -183,6 +223,14 @@ impl App {
             quit: false,
             running: false,
             default_gamma_m: 0.25 * sim.model().materials.iter().map(|m| m.density).fold(0.0, f64::max),
+            zoom: 1.0,
+            pan: [0.0; 2],
+            chart: if sim.time().is_some() {
+                ChartKind::Energy
+            } else {
+                ChartKind::Residual
+            },
+            confirm_quit: false,
         }
     }
 
@@ -289,6 +337,37 @@ impl App {
             }
             Action::CloseOverlay => {
                 self.show_help = false;
+                if self.confirm_quit {
+                    self.confirm_quit = false;
+                    self.status = "not quitting".into();
+                }
+                None
+            }
+            Action::ZoomIn | Action::ZoomOut | Action::ResetView => {
+                self.zoom = match action {
+                    Action::ZoomIn => (self.zoom * 2.0).min(1024.0),
+                    Action::ZoomOut => (self.zoom / 2.0).max(1.0),
+                    _ => 1.0,
+                };
+                if action == Action::ResetView || self.zoom == 1.0 {
+                    self.pan = [0.0; 2];
+                }
+                None
+            }
+            Action::PanLeft | Action::PanRight | Action::PanUp | Action::PanDown => {
+                // A fifth of the visible extent of the larger grid side.
+                let step = 0.2 * (self.grid.nx.max(self.grid.ny) as f64 * self.grid.h) / self.zoom;
+                let (dx, dy) = match action {
+                    Action::PanLeft => (-step, 0.0),
+                    Action::PanRight => (step, 0.0),
+                    Action::PanUp => (0.0, step),
+                    _ => (0.0, -step),
+                };
+                self.pan = [self.pan[0] + dx, self.pan[1] + dy];
+                None
+            }
+            Action::NextChart => {
+                self.chart = self.chart.next();
                 None
             }
             Action::NextField => {
@@ -296,6 +375,11 @@ impl App {
                 Some(Command::SetField(Field::ALL[(k + 1) % Field::ALL.len()]))
             }
             Action::Quit => {
+                if (self.busy || self.running) && !self.confirm_quit {
+                    self.confirm_quit = true;
+                    self.status = "a step is running: q again quits (the recording is closed), Esc stays".into();
+                    return None;
+                }
                 self.quit = true;
                 Some(Command::Quit)
             }

@@ -1,6 +1,6 @@
 //! Pure drawing: `draw(frame, &app)` renders the whole screen.
 
-use super::app::App;
+use super::app::{App, ChartKind};
 use crate::colormap;
 use crate::simulation::StepReport;
 use ratatui::layout::{Constraint, Layout, Rect};
@@ -49,10 +49,10 @@ pub fn draw(frame: &mut Frame, app: &App) {
     .areas(side);
     draw_params(frame, app, params);
     draw_last_step(frame, app, last);
-    if app.view.time.is_some() {
-        draw_energies(frame, app, chart);
-    } else {
-        draw_residuals(frame, app, chart);
+    match app.chart {
+        ChartKind::Residual => draw_residuals(frame, app, chart),
+        ChartKind::Energy if app.view.time.is_some() => draw_energies(frame, app, chart),
+        kind => draw_per_step(frame, app, chart, kind),
     }
     draw_table(frame, app, table);
     let keys = if app.view.time.is_some() {
@@ -92,14 +92,21 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
         2.0 * area.height.saturating_sub(2).max(1) as f64,
     );
     let scale = (w / inner.0).max(h / inner.1);
-    let (cx, cy) = (0.5 * (g.origin[0] + max[0]), 0.5 * (g.origin[1] + max[1]));
-    let (hw, hh) = (0.5 * scale * inner.0, 0.5 * scale * inner.1);
+    let (cx, cy) = (
+        0.5 * (g.origin[0] + max[0]) + app.pan[0],
+        0.5 * (g.origin[1] + max[1]) + app.pan[1],
+    );
+    let (hw, hh) = (0.5 * scale * inner.0 / app.zoom, 0.5 * scale * inner.1 / app.zoom);
     let legend = format!(" {} ", colormap::legend(app.view.field.label(), lo, hi));
     let canvas = Canvas::default()
         .block(
             Block::default()
                 .borders(Borders::ALL)
-                .title(" points ")
+                .title(if app.zoom > 1.0 {
+                    format!(" points (zoom x{}) ", app.zoom)
+                } else {
+                    " points ".to_string()
+                })
                 .title_bottom(legend),
         )
         .marker(Marker::Braille)
@@ -255,7 +262,7 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
         .block(
             Block::default()
                 .borders(Borders::ALL)
-                .title(" residual per iteration (log10) "),
+                .title(" residual per iteration (log10; v: next chart) "),
         )
         .x_axis(
             Axis::default()
@@ -267,6 +274,133 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
                 .bounds([ymin, ymax])
                 .labels([format!("1e{ymin}"), format!("1e{ymax}")]),
         );
+    frame.render_widget(chart, area);
+}
+
+/// Per-step series: condition numbers (log10, with and without ghost),
+/// energies (strain, external work, plastic dissipation) or errors (log10).
+fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
+    use ratatui::widgets::{Axis, Chart, Dataset, GraphType, LegendPosition};
+    let log = |v: f64| (v > 0.0 && v.is_finite()).then(|| v.log10());
+    let colors = [Color::Cyan, Color::Yellow, Color::Red, Color::Green, Color::Magenta];
+    let (title, mut series): (&str, Vec<(String, Vec<(f64, f64)>)>) = match kind {
+        ChartKind::Condition => (
+            " condition number per step (log10) ",
+            vec![
+                (
+                    "with ghost".into(),
+                    app.reports
+                        .iter()
+                        .filter_map(|r| Some((r.step as f64, log(r.condition?.value)?)))
+                        .collect(),
+                ),
+                (
+                    "without".into(),
+                    app.reports
+                        .iter()
+                        .filter_map(|r| Some((r.step as f64, log(r.condition_unstabilised?.value)?)))
+                        .collect(),
+                ),
+            ],
+        ),
+        ChartKind::Error => {
+            let names: Vec<&str> = app
+                .reports
+                .last()
+                .map_or(Vec::new(), |r| r.errors.iter().map(|e| e.name).collect());
+            (
+                " errors per step (log10) ",
+                names
+                    .iter()
+                    .map(|n| {
+                        (
+                            n.to_string(),
+                            app.reports
+                                .iter()
+                                .filter_map(|r| {
+                                    let e = r.errors.iter().find(|e| e.name == *n)?;
+                                    Some((r.step as f64, log(e.value)?))
+                                })
+                                .collect(),
+                        )
+                    })
+                    .collect(),
+            )
+        }
+        _ => (
+            " energy per step (J) ",
+            vec![
+                (
+                    "strain".into(),
+                    app.reports.iter().map(|r| (r.step as f64, r.energy.strain)).collect(),
+                ),
+                (
+                    "external work".into(),
+                    app.reports
+                        .iter()
+                        .map(|r| (r.step as f64, r.energy.external_work))
+                        .collect(),
+                ),
+                (
+                    "plastic".into(),
+                    app.reports
+                        .iter()
+                        .map(|r| (r.step as f64, r.energy.plastic_dissipation))
+                        .collect(),
+                ),
+            ],
+        ),
+    };
+    series.retain(|s| !s.1.is_empty());
+    let pts = series.iter().flat_map(|s| s.1.iter());
+    let (mut ymin, mut ymax, mut xmax) = (f64::INFINITY, f64::NEG_INFINITY, 1.0f64);
+    for &(x, y) in pts.filter(|p| p.1.is_finite()) {
+        ymin = ymin.min(y);
+        ymax = ymax.max(y);
+        xmax = xmax.max(x);
+    }
+    if !ymin.is_finite() {
+        (ymin, ymax) = (0.0, 1.0);
+    }
+    if kind != ChartKind::Energy {
+        (ymin, ymax) = (ymin.floor(), ymax.ceil().max(ymin.floor() + 1.0));
+    } else if ymax - ymin < 1e-300 {
+        ymax = ymin + 1.0;
+    }
+    let label = |v: f64| {
+        if kind == ChartKind::Energy {
+            format!("{v:.2e}")
+        } else {
+            format!("1e{v}")
+        }
+    };
+    let datasets: Vec<Dataset> = series
+        .iter()
+        .enumerate()
+        .map(|(k, (name, data))| {
+            Dataset::default()
+                .name(name.clone())
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(colors[k % colors.len()]))
+                .data(data)
+        })
+        .collect();
+    let empty = datasets.is_empty();
+    let chart = Chart::new(datasets)
+        .block(Block::default().borders(Borders::ALL).title(if empty {
+            format!("{title}— nothing yet (v: next chart) ")
+        } else {
+            format!("{title}(v: next chart) ")
+        }))
+        .x_axis(
+            Axis::default()
+                .bounds([1.0, xmax])
+                .labels(["1".to_string(), format!("{xmax}")]),
+        )
+        .y_axis(Axis::default().bounds([ymin, ymax]).labels([label(ymin), label(ymax)]))
+        .legend_position(Some(LegendPosition::TopLeft))
+        .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1)));
     frame.render_widget(chart, area);
 }
 
@@ -509,11 +643,14 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("0       ghost stabilisation off / back on"),
         Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
         Line::raw("M / m   ghost mass gamma_M x10 / /10"),
+        Line::raw("v       next chart: residual, condition, energy, error"),
+        Line::raw("+ / -   zoom the points (also the mouse wheel); z: fit"),
+        Line::raw("arrows  pan (also h j k l)"),
         Line::raw("?       show or hide this help"),
-        Line::raw("Esc     close this help"),
-        Line::raw("q       quit (the recording is closed cleanly)"),
+        Line::raw("Esc     close this help, or stay after a first q"),
+        Line::raw("q       quit (twice while a step runs; the recording is closed)"),
     ];
-    let w = 50.min(area.width);
+    let w = 70.min(area.width);
     let h = (text.len() as u16 + 2).min(area.height);
     let r = Rect::new(area.x + (area.width - w) / 2, area.y + (area.height - h) / 2, w, h);
     frame.render_widget(Clear, r);

@@ -14,7 +14,9 @@ use crate::field::Field;
 use crate::record::Recorder;
 use crate::simulation::Simulation;
 use app::{Action, App, Command, Update, View};
-use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind};
+use ratatui::crossterm::event::{
+    self, DisableMouseCapture, EnableMouseCapture, Event, KeyCode, KeyEventKind, MouseEventKind,
+};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -33,6 +35,14 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('M') => Some(Action::RaiseGammaM),
         KeyCode::Char('m') => Some(Action::LowerGammaM),
         KeyCode::Enter => Some(Action::RunPause),
+        KeyCode::Char('+') | KeyCode::Char('=') => Some(Action::ZoomIn),
+        KeyCode::Char('-') => Some(Action::ZoomOut),
+        KeyCode::Char('z') => Some(Action::ResetView),
+        KeyCode::Left | KeyCode::Char('h') => Some(Action::PanLeft),
+        KeyCode::Right | KeyCode::Char('l') => Some(Action::PanRight),
+        KeyCode::Up | KeyCode::Char('k') => Some(Action::PanUp),
+        KeyCode::Down | KeyCode::Char('j') => Some(Action::PanDown),
+        KeyCode::Char('v') => Some(Action::NextChart),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -143,6 +153,7 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
         .spawn(move || engine(sim, recorder, cmd_rx, up_tx))?;
     // ratatui::init installs a panic hook that restores the terminal.
     let mut terminal = ratatui::init();
+    let _ = ratatui::crossterm::execute!(std::io::stdout(), EnableMouseCapture);
     let result = (|| -> std::io::Result<()> {
         while !app.quit {
             while let Ok(u) = up_rx.try_recv() {
@@ -161,17 +172,24 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
             // While running, come back quickly for the next step's update.
             let wait = if app.running { 2 } else { 50 };
             if event::poll(Duration::from_millis(wait))? {
-                if let Event::Key(k) = event::read()? {
-                    if k.kind == KeyEventKind::Press {
-                        if let Some(cmd) = action_for(k.code).and_then(|a| app.apply(a)) {
-                            let _ = cmd_tx.send(cmd);
-                        }
-                    }
+                let action = match event::read()? {
+                    Event::Key(k) if k.kind == KeyEventKind::Press => action_for(k.code),
+                    // The mouse wheel zooms the canvas.
+                    Event::Mouse(m) => match m.kind {
+                        MouseEventKind::ScrollUp => Some(Action::ZoomIn),
+                        MouseEventKind::ScrollDown => Some(Action::ZoomOut),
+                        _ => None,
+                    },
+                    _ => None,
+                };
+                if let Some(cmd) = action.and_then(|a| app.apply(a)) {
+                    let _ = cmd_tx.send(cmd);
                 }
             }
         }
         Ok(())
     })();
+    let _ = ratatui::crossterm::execute!(std::io::stdout(), DisableMouseCapture);
     ratatui::restore();
     // Let the engine finish its step and close the recording.
     let _ = cmd_tx.send(Command::Quit);
