@@ -283,7 +283,9 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
     use ratatui::widgets::{Axis, Chart, Dataset, GraphType, LegendPosition};
     let log = |v: f64| (v > 0.0 && v.is_finite()).then(|| v.log10());
     let colors = [Color::Cyan, Color::Yellow, Color::Red, Color::Green, Color::Magenta];
-    let (title, mut series): (&str, Vec<(String, Vec<(f64, f64)>)>) = match kind {
+    /// A named series of `(step, value)`.
+    type Series = (String, Vec<(f64, f64)>);
+    let (title, mut series): (&str, Vec<Series>) = match kind {
         ChartKind::Condition => (
             " condition number per step (log10) ",
             vec![
