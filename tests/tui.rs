@@ -274,3 +274,53 @@ fn charts_fields_zoom_and_quit_confirmation() {
     assert_eq!(app.apply(Action::Quit), Some(Command::Quit));
     assert!(app.quit);
 }
+
+#[test]
+fn failure_panel_and_redo_with_new_parameters() {
+    // G Table 5: the plain GIMP beam (h = 0.25, 2x2 points) fails at step
+    // 12; with gamma_K the redone step completes.
+    let mut sim = sim_with("elastic-beam-ghost", |s| {
+        s.grid.h = 0.25;
+        s.analysis.gamma_k = 0.0;
+    });
+    let mut app = App::new(&sim, None);
+    let (snapshot, failure) = loop {
+        let snap = sim.snapshot();
+        match sim.step() {
+            Ok(r) => app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field)))),
+            Err(f) => break (snap, f),
+        }
+    };
+    assert_eq!(failure.step(), 12);
+    app.update(Update::Failed(failure.clone()));
+    let all = screen(&app).join("\n");
+    assert!(
+        all.contains("step 12 failed") && all.contains("raise the ghost penalty"),
+        "{all}"
+    );
+    assert!(all.contains("r redoes the step"), "{all}");
+    // Raise gamma_K, then redo: the engine restores the snapshot and steps.
+    assert!(matches!(app.apply(Action::RaiseGammaK), Some(Command::SetGammaK(_))));
+    assert_eq!(app.apply(Action::Redo), Some(Command::Redo));
+    sim.restore(&snapshot);
+    let mut p = sim.params().clone();
+    p.gamma_k = 12.0e6;
+    sim.set_params(p);
+    let after = sim.step();
+    assert!(after.is_ok(), "{after:?}");
+    app.update(Update::Redone(
+        Box::new((Err(failure), after)),
+        Box::new(View::of(&sim, app.view.field)),
+    ));
+    assert!(app.failure.is_none() && !app.busy);
+    let all = screen(&app).join("\n");
+    assert!(
+        all.contains("redo: before / after") && all.contains("FAILED") && all.contains("completed"),
+        "{all}"
+    );
+    assert_eq!(app.reports.last().unwrap().step, 12);
+    // Esc closes the comparison; stepping goes on.
+    app.apply(Action::CloseOverlay);
+    assert!(app.redo.is_none());
+    assert_eq!(app.apply(Action::Step), Some(Command::Step));
+}

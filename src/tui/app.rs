@@ -119,6 +119,9 @@ pub enum Action {
     ResetView,
     /// Next chart: residuals, condition numbers, energies, errors.
     NextChart,
+    /// Redo the last step (done or failed) from its snapshot with the
+    /// current parameters, and compare.
+    Redo,
     CloseOverlay,
     NextField,
     Quit,
@@ -135,6 +138,8 @@ pub enum Command {
     SetDeltaOverH(f64),
     /// New ghost mass penalty `gamma_M` (from the next step).
     SetGammaM(f64),
+    /// Restore the state before the last step and take it again.
+    Redo,
     Quit,
 }
 
@@ -196,7 +201,14 @@ pub struct App {
     pub chart: ChartKind,
     /// `q` was pressed while a step runs: a second `q` quits.
     pub confirm_quit: bool,
+    /// The last redo: the step's outcome before and after.
+    pub redo: Option<Box<(Outcome, Outcome)>>,
+    /// Show the failure panel (Esc hides it; the failure stays).
+    pub show_failure: bool,
 }
+
+/// A step's outcome.
+pub type Outcome = Result<StepReport, StepFailure>;
 
 impl App {
     pub fn new(sim: &Simulation, recording: Option<String>) -> App {
@@ -231,6 +243,8 @@ impl App {
                 ChartKind::Residual
             },
             confirm_quit: false,
+            redo: None,
+            show_failure: false,
         }
     }
 
@@ -257,9 +271,6 @@ impl App {
             Action::Step => {
                 if self.busy {
                     self.status = "a step is running".into();
-                    None
-                } else if self.failure.is_some() {
-                    self.status = "the last step failed; nothing more to do (q quits)".into();
                     None
                 } else if self.finished() {
                     self.status = format!("all {} load steps done (q quits)", self.view.load_steps);
@@ -335,8 +346,23 @@ impl App {
                 .into();
                 self.pending()
             }
+            Action::Redo => {
+                if self.busy {
+                    self.status = "wait for the step to finish before redoing it".into();
+                    None
+                } else if self.reports.is_empty() && self.failure.is_none() {
+                    self.status = "no step to redo yet".into();
+                    None
+                } else {
+                    self.busy = true;
+                    self.status = "redoing the last step with the current parameters...".into();
+                    Some(Command::Redo)
+                }
+            }
             Action::CloseOverlay => {
                 self.show_help = false;
+                self.show_failure = false;
+                self.redo = None;
                 if self.confirm_quit {
                     self.confirm_quit = false;
                     self.status = "not quitting".into();
@@ -391,14 +417,40 @@ impl App {
         match update {
             Update::Stepped(report, view) => {
                 self.busy = false;
+                self.failure = None;
+                self.show_failure = false;
                 self.status = format!("step {} done in {:.3} s", report.step, report.timings.total);
                 self.reports.push(*report);
                 self.view = *view;
             }
             Update::Failed(failure) => {
                 self.busy = false;
+                self.running = false;
                 self.status = failure.to_string();
                 self.failure = Some(failure);
+                self.show_failure = true;
+            }
+            Update::Redone(outcomes, view) => {
+                self.busy = false;
+                let (before, after) = &*outcomes;
+                // The redone step replaces the one it redid.
+                if before.is_ok() {
+                    self.reports.pop();
+                }
+                match after {
+                    Ok(r) => {
+                        self.status = format!("step {} redone: see the comparison (Esc closes)", r.step);
+                        self.reports.push(r.clone());
+                        self.failure = None;
+                        self.show_failure = false;
+                    }
+                    Err(f) => {
+                        self.status = format!("the redo failed too: {f}");
+                        self.failure = Some(f.clone());
+                    }
+                }
+                self.view = *view;
+                self.redo = Some(outcomes);
             }
             Update::View(view) => self.view = *view,
             Update::Params(p) => self.params = p,
@@ -413,6 +465,8 @@ pub enum Update {
     /// The engine's parameters after a change.
     Params(Params),
     Stepped(Box<StepReport>, Box<View>),
+    /// A redo: the outcomes before and after, and the view after.
+    Redone(Box<(Outcome, Outcome)>, Box<View>),
     Failed(StepFailure),
     View(Box<View>),
     Message(String),

@@ -2,7 +2,7 @@
 
 use super::app::{App, ChartKind};
 use crate::colormap;
-use crate::simulation::StepReport;
+use crate::simulation::{StepFailure, StepReport};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
@@ -69,9 +69,131 @@ pub fn draw(frame: &mut Frame, app: &App) {
         Paragraph::new(format!(" {keys}  | {}{rec}", app.status)).style(Style::new().fg(Color::Gray)),
         status,
     );
+    if let Some(r) = &app.redo {
+        draw_redo(frame, area, r);
+    } else if let (true, Some(f)) = (app.show_failure, &app.failure) {
+        draw_failure(frame, area, f);
+    }
     if app.show_help {
         draw_help(frame, area);
     }
+}
+
+/// A centred box of at most `w x h` cells, cleared.
+fn centred(frame: &mut Frame, area: Rect, w: u16, h: u16) -> Rect {
+    let (w, h) = (w.min(area.width), h.min(area.height));
+    let r = Rect::new(area.x + (area.width - w) / 2, area.y + (area.height - h) / 2, w, h);
+    frame.render_widget(Clear, r);
+    r
+}
+
+/// What to try after a failure of this kind.
+fn remedies(f: &StepFailure) -> &'static [&'static str] {
+    match f {
+        StepFailure::NotConverged { .. } => &[
+            "raise the ghost penalty gamma_K (G), or switch ghost on (0)",
+            "take smaller load steps (more steps in the scene)",
+            "loosen the tolerance if the residual stalls at round-off",
+        ],
+        StepFailure::Singular { .. } => &[
+            "raise gamma_K (G): nodes that points barely touch need it",
+            "enlarge the implicit-boundary bandwidth delta (D)",
+            "for dynamics: use the stabilised mass or raise gamma_M (M)",
+            "check that supports hold every rigid-body mode",
+        ],
+        StepFailure::NonFinite { .. } | StepFailure::Diverged { .. } => &[
+            "explicit dynamics: raise gamma_M (M) or use the stabilised mass",
+            "take a smaller time step (more steps over the duration)",
+            "quasi-static: raise gamma_K (G) or take smaller load steps",
+        ],
+        StepFailure::LeftGrid { .. } => &["enlarge the grid in the scene file"],
+        StepFailure::Boundary { .. } => &["check the boundary's points: it needs at least two, in order"],
+        StepFailure::Internal { .. } => &["this is a bug: please report it with the scene file"],
+        StepFailure::Finished { .. } => &[],
+    }
+}
+
+/// The failure panel: why, the residual history and what to try.
+fn draw_failure(frame: &mut Frame, area: Rect, f: &StepFailure) {
+    let r = centred(frame, area, 86, 16);
+    let mut lines = vec![Line::styled(f.to_string(), Style::new().fg(Color::Red))];
+    if !f.residuals().is_empty() {
+        let res: Vec<String> = f.residuals().iter().map(|x| format!("{x:.2e}")).collect();
+        lines.push(Line::raw(format!("residuals: {}", res.join(" "))));
+    }
+    lines.push(Line::raw(""));
+    lines.push(Line::styled("try:", Style::new().add_modifier(Modifier::BOLD)));
+    for t in remedies(f) {
+        lines.push(Line::raw(format!("  - {t}")));
+    }
+    lines.push(Line::raw(""));
+    lines.push(Line::raw(
+        "then r redoes the step with the new parameters (space tries it again); Esc hides this",
+    ));
+    frame.render_widget(
+        Paragraph::new(lines).wrap(Wrap { trim: false }).block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(format!(" step {} failed ", f.step()))
+                .border_style(Style::new().fg(Color::Red)),
+        ),
+        r,
+    );
+}
+
+/// Before and after a redo, side by side.
+fn draw_redo(frame: &mut Frame, area: Rect, outcomes: &(super::app::Outcome, super::app::Outcome)) {
+    let r = centred(frame, area, 90, 14);
+    let describe = |o: &super::app::Outcome| -> Vec<String> {
+        match o {
+            Ok(r) => {
+                let mut v = vec![
+                    "completed".to_string(),
+                    format!("iterations {}", r.iterations),
+                    format!(
+                        "residuals {}",
+                        r.residuals
+                            .iter()
+                            .map(|x| format!("{x:.1e}"))
+                            .collect::<Vec<_>>()
+                            .join(" ")
+                    ),
+                    r.condition.map_or("cond -".into(), |c| format!("cond {:.3e}", c.value)),
+                ];
+                v.extend(r.errors.iter().map(|e| format!("{} {:.4e}", e.name, e.value)));
+                v
+            }
+            Err(f) => vec![
+                "FAILED".to_string(),
+                f.to_string(),
+                format!(
+                    "residuals {}",
+                    f.residuals()
+                        .iter()
+                        .map(|x| format!("{x:.1e}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                ),
+            ],
+        }
+    };
+    let (a, b) = (describe(&outcomes.0), describe(&outcomes.1));
+    let rows = (0..a.len().max(b.len())).map(|k| {
+        Row::new([
+            Cell::from(a.get(k).cloned().unwrap_or_default()),
+            Cell::from(b.get(k).cloned().unwrap_or_default()),
+        ])
+    });
+    frame.render_widget(
+        Table::new(rows, [Constraint::Percentage(50), Constraint::Percentage(50)])
+            .header(Row::new(["before", "after (current parameters)"]).style(Style::new().add_modifier(Modifier::BOLD)))
+            .block(
+                Block::default()
+                    .borders(Borders::ALL)
+                    .title(" redo: before / after (Esc closes) "),
+            ),
+        r,
+    );
 }
 
 fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
@@ -646,6 +768,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
         Line::raw("M / m   ghost mass gamma_M x10 / /10"),
         Line::raw("v       next chart: residual, condition, energy, error"),
+        Line::raw("r       redo the last step with the current parameters"),
         Line::raw("+ / -   zoom the points (also the mouse wheel); z: fit"),
         Line::raw("arrows  pan (also h j k l)"),
         Line::raw("?       show or hide this help"),

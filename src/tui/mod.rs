@@ -43,6 +43,7 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Up | KeyCode::Char('k') => Some(Action::PanUp),
         KeyCode::Down | KeyCode::Char('j') => Some(Action::PanDown),
         KeyCode::Char('v') => Some(Action::NextChart),
+        KeyCode::Char('r') => Some(Action::Redo),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -76,6 +77,8 @@ fn engine(
     updates: mpsc::Sender<Update>,
 ) {
     let mut field = Field::SigmaYy;
+    // The state before the last step and that step's outcome, for redo.
+    let mut before: Option<(crate::simulation::Snapshot, Option<app::Outcome>)> = None;
     let warn = |updates: &mpsc::Sender<Update>, r: Result<(), crate::record::RecordError>| {
         if let Err(e) = r {
             let _ = updates.send(Update::Message(format!("recording stopped: {e}")));
@@ -85,26 +88,69 @@ fn engine(
     };
     while let Ok(cmd) = commands.recv() {
         match cmd {
-            Command::Step => match sim.step_guarded() {
-                Ok(report) => {
-                    if let Some(rec) = recorder.as_mut() {
-                        let r = rec.log_step(&report, &sim);
-                        if !warn(&updates, r) {
-                            recorder = None;
+            Command::Step => {
+                before = Some((sim.snapshot(), None));
+                match sim.step_guarded() {
+                    Ok(report) => {
+                        if let Some(b) = before.as_mut() {
+                            b.1 = Some(Ok(report.clone()));
                         }
-                    }
-                    let _ = updates.send(Update::Stepped(Box::new(report), Box::new(View::of(&sim, field))));
-                }
-                Err(failure) => {
-                    if let Some(rec) = recorder.as_mut() {
-                        let r = rec.log_failure(&failure);
-                        if !warn(&updates, r) {
-                            recorder = None;
+                        if let Some(rec) = recorder.as_mut() {
+                            let r = rec.log_step(&report, &sim);
+                            if !warn(&updates, r) {
+                                recorder = None;
+                            }
                         }
+                        let _ = updates.send(Update::Stepped(Box::new(report), Box::new(View::of(&sim, field))));
                     }
-                    let _ = updates.send(Update::Failed(failure));
+                    Err(failure) => {
+                        if let Some(b) = before.as_mut() {
+                            b.1 = Some(Err(failure.clone()));
+                        }
+                        if let Some(rec) = recorder.as_mut() {
+                            let r = rec.log_failure(&failure);
+                            if !warn(&updates, r) {
+                                recorder = None;
+                            }
+                        }
+                        let _ = updates.send(Update::Failed(failure));
+                    }
                 }
-            },
+            }
+            Command::Redo => {
+                let Some((snap, Some(old))) = before.take() else {
+                    let _ = updates.send(Update::Message("no step to redo".into()));
+                    continue;
+                };
+                sim.restore(&snap);
+                let p = sim.params();
+                let text = format!(
+                    "redo of step {} with gamma_K = {:e}, delta/h = {:e}, gamma_M = {:e}, tolerance = {:e}",
+                    sim.step_index() + 1,
+                    p.gamma_k,
+                    p.delta_over_h,
+                    p.gamma_m,
+                    p.tolerance
+                );
+                if let Some(rec) = recorder.as_mut() {
+                    let r = rec.event(&text, "INFO");
+                    if !warn(&updates, r) {
+                        recorder = None;
+                    }
+                }
+                let new = sim.step_guarded();
+                if let Some(rec) = recorder.as_mut() {
+                    let r = match &new {
+                        Ok(report) => rec.log_step(report, &sim),
+                        Err(f) => rec.log_failure(f),
+                    };
+                    if !warn(&updates, r) {
+                        recorder = None;
+                    }
+                }
+                before = Some((snap, Some(new.clone())));
+                let _ = updates.send(Update::Redone(Box::new((old, new)), Box::new(View::of(&sim, field))));
+            }
             Command::SetField(f) => {
                 field = f;
                 let _ = updates.send(Update::View(Box::new(View::of(&sim, field))));
