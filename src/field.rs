@@ -42,6 +42,19 @@ impl Field {
         }
     }
 
+    /// A short name for files and recordings (`sigma_yy`, `speed`, ...).
+    pub fn key(self) -> &'static str {
+        match self {
+            Field::SigmaXx => "sigma_xx",
+            Field::SigmaYy => "sigma_yy",
+            Field::SigmaXy => "sigma_xy",
+            Field::DisplacementMagnitude => "displacement_magnitude",
+            Field::PlasticWork => "plastic_work",
+            Field::Speed => "speed",
+            Field::Error => "error",
+        }
+    }
+
     /// The field's value at every point.
     pub fn values(self, sim: &Simulation) -> Vec<f64> {
         let pts = sim.points();

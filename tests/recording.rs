@@ -66,6 +66,16 @@ fn recording_holds_grid_points_and_metrics() {
         point_counts,
         BTreeMap::from([(0, n_points), (1, n_points), (2, n_points)])
     );
+    // Per-point values of every field ride along with the points.
+    let sigma_yy: rerun::ComponentIdentifier = "sigma_yy".into();
+    let last: Vec<f64> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/points")
+        .flat_map(|c| c.iter_slices::<f64>(sigma_yy).map(|v| v.to_vec()).collect::<Vec<_>>())
+        .last()
+        .expect("sigma_yy on /points");
+    let expected: Vec<f64> = sim.points().stress.iter().map(|s| s[1]).collect();
+    assert_eq!(last, expected);
     for r in &reports {
         let s = r.step as i64;
         // Scalars are stored as f64: values come back bit-identical.

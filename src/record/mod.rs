@@ -9,7 +9,7 @@
 //! | `scene` | TextDocument (the scene file) | static |
 //! | `grid` | LineStrips2D | static |
 //! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
-//! | `points` | Points2D, coloured by sigma_yy, radius from volume | every step |
+//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of every field (`sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_work`, `speed`, `error`) | every step |
 //! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
 //! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | every step |
 //! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,cut_cells}` | Scalars | every step |
@@ -216,6 +216,12 @@ impl Recorder {
             "points",
             &rerun::Points2D::new(positions).with_colors(colors).with_radii(radii),
         ))?;
+        // Every field's value per point, shown when a point is hovered.
+        let mut values = rerun::external::re_sdk_types::AnyValues::default();
+        for f in Field::ALL {
+            values = values.with_component::<rerun::components::Scalar>(f.key(), f.values(sim));
+        }
+        self.check(self.rec.log("points", &values))?;
         let g = &sim.model().grid;
         let boxes: Vec<Vec<[f32; 2]>> = sim.active_cells().iter().map(|&c| cell_box(g, c)).collect();
         self.check(self.rec.log(
