@@ -222,6 +222,9 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         let rel = norm(&r) / if denom > 0.0 { denom } else { 1.0 };
         residuals.push(rel);
         timings.assembly += t.elapsed().as_secs_f64();
+        if !sim.report_progress(step, iterations, rel) {
+            return Err(StepFailure::Cancelled { step, residuals });
+        }
         if !rel.is_finite() {
             return Err(StepFailure::NonFinite {
                 step,

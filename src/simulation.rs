@@ -145,7 +145,23 @@ pub enum StepFailure {
     /// The engine panicked (a bug): caught by [`Simulation::step_guarded`];
     /// the state is the last good step.
     Internal { step: usize, message: String },
+    /// The observer cancelled the step ([`Simulation::set_progress`]); the
+    /// state is the last good step.
+    Cancelled { step: usize, residuals: Vec<f64> },
 }
+
+/// Progress inside a step, for observers: each Newton iteration's (or the
+/// linear solve's) relative residual as it is computed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Progress {
+    pub step: usize,
+    /// 0 before the first correction.
+    pub iteration: usize,
+    pub residual: f64,
+}
+
+/// Called with each [`Progress`]; returning `false` cancels the step.
+pub type ProgressHook = Box<dyn FnMut(&Progress) -> bool + Send>;
 
 impl StepFailure {
     pub fn step(&self) -> usize {
@@ -157,13 +173,16 @@ impl StepFailure {
             | StepFailure::Boundary { step, .. }
             | StepFailure::LeftGrid { step, .. }
             | StepFailure::Diverged { step, .. }
-            | StepFailure::Internal { step, .. } => *step,
+            | StepFailure::Internal { step, .. }
+            | StepFailure::Cancelled { step, .. } => *step,
         }
     }
 
     pub fn residuals(&self) -> &[f64] {
         match self {
-            StepFailure::NotConverged { residuals, .. } | StepFailure::NonFinite { residuals, .. } => residuals,
+            StepFailure::NotConverged { residuals, .. }
+            | StepFailure::NonFinite { residuals, .. }
+            | StepFailure::Cancelled { residuals, .. } => residuals,
             _ => &[],
         }
     }
@@ -197,6 +216,12 @@ impl fmt::Display for StepFailure {
                 position[1]
             ),
             StepFailure::Diverged { step, reason } => write!(f, "step {step} failed: diverged: {reason}"),
+            StepFailure::Cancelled { step, residuals } => write!(
+                f,
+                "step {step} cancelled (residuals {}); the state is that of step {}",
+                fmt_residuals(residuals),
+                step - 1
+            ),
             StepFailure::Internal { step, message } => write!(
                 f,
                 "step {step} failed: internal error (a bug in mpmlab; please report it with the scene): {message}"
@@ -251,6 +276,9 @@ pub struct Simulation {
     pub(crate) state: State,
     /// Explicit dynamics: the mass pattern of the last step.
     pub(crate) mass_cache: crate::dynamics::MassCache,
+    /// The observer's progress hook (behind a mutex so steps can call it
+    /// through `&self`).
+    progress: Option<std::sync::Mutex<ProgressHook>>,
 }
 
 impl Simulation {
@@ -280,6 +308,7 @@ impl Simulation {
             params,
             state,
             mass_cache: Default::default(),
+            progress: None,
         }
     }
 
@@ -376,6 +405,27 @@ impl Simulation {
 
     pub fn restore(&mut self, snapshot: &Snapshot) {
         self.state = snapshot.0.clone();
+    }
+
+    /// Watch steps as they compute: `hook` gets every residual and may
+    /// cancel the step by returning `false` ([`StepFailure::Cancelled`]).
+    pub fn set_progress(&mut self, hook: Option<ProgressHook>) {
+        self.progress = hook.map(std::sync::Mutex::new);
+    }
+
+    /// Tell the hook; `false` when the observer cancels the step.
+    pub(crate) fn report_progress(&self, step: usize, iteration: usize, residual: f64) -> bool {
+        match &self.progress {
+            Some(m) => match m.lock() {
+                Ok(mut hook) => hook(&Progress {
+                    step,
+                    iteration,
+                    residual,
+                }),
+                Err(_) => true,
+            },
+            None => true,
+        }
     }
 
     /// [`Simulation::step`], with a panic inside the engine turned into
@@ -578,6 +628,9 @@ impl Simulation {
             residuals.push(rel);
         }
         timings.solve = t.elapsed().as_secs_f64();
+        if !self.report_progress(step, 1, rel) {
+            return Err(StepFailure::Cancelled { step, residuals });
+        }
         if !residual_norm.is_finite() || !rel.is_finite() || du.iter().any(|v| !v.is_finite()) {
             return Err(StepFailure::NonFinite {
                 step,

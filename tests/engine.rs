@@ -90,3 +90,31 @@ fn tolerance_is_enforced() {
     }
     assert_eq!(sim.step_index(), 0);
 }
+
+#[test]
+fn progress_streams_residuals_and_can_cancel_a_step() {
+    use mpmlab::simulation::{Progress, StepFailure};
+    use std::sync::{Arc, Mutex};
+    // The finite-deformation beam: every Newton residual reaches the hook;
+    // returning false at the second one cancels the step, leaving step 0.
+    let mut sim = common::sim_with("elastic-beam-ghost", |_| {});
+    let seen: Arc<Mutex<Vec<Progress>>> = Arc::default();
+    let s = seen.clone();
+    sim.set_progress(Some(Box::new(move |p| {
+        s.lock().unwrap().push(p.clone());
+        p.iteration < 1
+    })));
+    match sim.step() {
+        Err(StepFailure::Cancelled { step: 1, residuals }) => assert_eq!(residuals.len(), 2),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(sim.step_index(), 0);
+    let p = seen.lock().unwrap().clone();
+    assert_eq!(p.iter().map(|p| p.iteration).collect::<Vec<_>>(), [0, 1]);
+    assert!(p.iter().all(|p| p.step == 1 && p.residual.is_finite()));
+    // Without the hook the same step completes, and the hook saw what the
+    // report holds.
+    sim.set_progress(None);
+    let r = sim.step().unwrap();
+    assert_eq!(r.residuals[..2], [p[0].residual, p[1].residual]);
+}

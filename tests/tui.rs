@@ -324,3 +324,30 @@ fn failure_panel_and_redo_with_new_parameters() {
     assert!(app.redo.is_none());
     assert_eq!(app.apply(Action::Step), Some(Command::Step));
 }
+
+#[test]
+fn progress_is_shown_and_a_step_can_be_cancelled() {
+    use mpmlab::simulation::{Progress, StepFailure};
+    let sim = sim_with("elastic-beam-ghost", |_| {});
+    let mut app = App::new(&sim, None);
+    assert_eq!(app.apply(Action::Step), Some(Command::Step));
+    app.update(Update::Progress(Progress {
+        step: 1,
+        iteration: 2,
+        residual: 3.5e-4,
+    }));
+    let all = screen(&app).join("\n");
+    assert!(
+        all.contains("iteration 2, residual") && all.contains("3.50e-4"),
+        "{all}"
+    );
+    assert_eq!(app.apply(Action::Cancel), Some(Command::Cancel));
+    app.update(Update::Failed(StepFailure::Cancelled {
+        step: 1,
+        residuals: vec![1.0, 3.5e-4],
+    }));
+    // A cancelled step is not a failure: no panel, stepping goes on.
+    assert!(app.failure.is_none() && !app.show_failure && !app.busy);
+    assert!(app.status.contains("cancelled"), "{}", app.status);
+    assert_eq!(app.apply(Action::Step), Some(Command::Step));
+}

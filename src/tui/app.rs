@@ -122,6 +122,8 @@ pub enum Action {
     /// Redo the last step (done or failed) from its snapshot with the
     /// current parameters, and compare.
     Redo,
+    /// Cancel the step being computed.
+    Cancel,
     CloseOverlay,
     NextField,
     Quit,
@@ -140,6 +142,9 @@ pub enum Command {
     SetGammaM(f64),
     /// Restore the state before the last step and take it again.
     Redo,
+    /// Stop the step being computed (handled by the UI loop through a flag
+    /// the engine's progress hook reads).
+    Cancel,
     Quit,
 }
 
@@ -205,6 +210,8 @@ pub struct App {
     pub redo: Option<Box<(Outcome, Outcome)>>,
     /// Show the failure panel (Esc hides it; the failure stays).
     pub show_failure: bool,
+    /// The latest residual of the step being computed.
+    pub progress: Option<crate::simulation::Progress>,
 }
 
 /// A step's outcome.
@@ -245,6 +252,7 @@ impl App {
             confirm_quit: false,
             redo: None,
             show_failure: false,
+            progress: None,
         }
     }
 
@@ -359,6 +367,15 @@ impl App {
                     Some(Command::Redo)
                 }
             }
+            Action::Cancel => {
+                self.running = false;
+                if self.busy {
+                    self.status = "cancelling the step...".into();
+                    Some(Command::Cancel)
+                } else {
+                    None
+                }
+            }
             Action::CloseOverlay => {
                 self.show_help = false;
                 self.show_failure = false;
@@ -415,8 +432,10 @@ impl App {
     /// Take an update from the engine.
     pub fn update(&mut self, update: Update) {
         match update {
+            Update::Progress(p) => self.progress = Some(p),
             Update::Stepped(report, view) => {
                 self.busy = false;
+                self.progress = None;
                 self.failure = None;
                 self.show_failure = false;
                 self.status = format!("step {} done in {:.3} s", report.step, report.timings.total);
@@ -426,12 +445,17 @@ impl App {
             Update::Failed(failure) => {
                 self.busy = false;
                 self.running = false;
+                self.progress = None;
                 self.status = failure.to_string();
+                if matches!(failure, StepFailure::Cancelled { .. }) {
+                    return;
+                }
                 self.failure = Some(failure);
                 self.show_failure = true;
             }
             Update::Redone(outcomes, view) => {
                 self.busy = false;
+                self.progress = None;
                 let (before, after) = &*outcomes;
                 // The redone step replaces the one it redid.
                 if before.is_ok() {
@@ -465,6 +489,8 @@ pub enum Update {
     /// The engine's parameters after a change.
     Params(Params),
     Stepped(Box<StepReport>, Box<View>),
+    /// A residual of the step being computed.
+    Progress(crate::simulation::Progress),
     /// A redo: the outcomes before and after, and the view after.
     Redone(Box<(Outcome, Outcome)>, Box<View>),
     Failed(StepFailure),

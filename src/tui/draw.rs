@@ -109,6 +109,7 @@ fn remedies(f: &StepFailure) -> &'static [&'static str] {
         StepFailure::LeftGrid { .. } => &["enlarge the grid in the scene file"],
         StepFailure::Boundary { .. } => &["check the boundary's points: it needs at least two, in order"],
         StepFailure::Internal { .. } => &["this is a bug: please report it with the scene file"],
+        StepFailure::Cancelled { .. } => &["space takes the step again (change parameters first if you like)"],
         StepFailure::Finished { .. } => &[],
     }
 }
@@ -630,7 +631,13 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
         lines.push(Line::raw(f.to_string()));
     } else if app.busy {
         lines.push(Line::styled(
-            format!("computing step {}...", app.view.step + 1),
+            match &app.progress {
+                Some(p) => format!(
+                    "computing step {}... iteration {}, residual {:.2e} (x cancels)",
+                    p.step, p.iteration, p.residual
+                ),
+                None => format!("computing step {}... (x cancels)", app.view.step + 1),
+            },
             Style::new().fg(Color::Yellow),
         ));
     }
@@ -769,6 +776,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("M / m   ghost mass gamma_M x10 / /10"),
         Line::raw("v       next chart: residual, condition, energy, error"),
         Line::raw("r       redo the last step with the current parameters"),
+        Line::raw("x       cancel the step being computed"),
         Line::raw("+ / -   zoom the points (also the mouse wheel); z: fit"),
         Line::raw("arrows  pan (also h j k l)"),
         Line::raw("?       show or hide this help"),

@@ -17,7 +17,8 @@ use app::{Action, App, Command, Update, View};
 use ratatui::crossterm::event::{
     self, DisableMouseCapture, EnableMouseCapture, Event, KeyCode, KeyEventKind, MouseEventKind,
 };
-use std::sync::mpsc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 /// Map a key to an action.
@@ -44,6 +45,7 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Down | KeyCode::Char('j') => Some(Action::PanDown),
         KeyCode::Char('v') => Some(Action::NextChart),
         KeyCode::Char('r') => Some(Action::Redo),
+        KeyCode::Char('x') => Some(Action::Cancel),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -75,7 +77,16 @@ fn engine(
     mut recorder: Option<Recorder>,
     commands: mpsc::Receiver<Command>,
     updates: mpsc::Sender<Update>,
+    cancel: Arc<AtomicBool>,
 ) {
+    // Stream residuals to the UI; the UI's cancel flag stops a step.
+    {
+        let (tx, cancel) = (updates.clone(), cancel.clone());
+        sim.set_progress(Some(Box::new(move |p| {
+            let _ = tx.send(Update::Progress(p.clone()));
+            !cancel.load(Ordering::SeqCst)
+        })));
+    }
     let mut field = Field::SigmaYy;
     // The state before the last step and that step's outcome, for redo.
     let mut before: Option<(crate::simulation::Snapshot, Option<app::Outcome>)> = None;
@@ -88,7 +99,9 @@ fn engine(
     };
     while let Ok(cmd) = commands.recv() {
         match cmd {
+            Command::Cancel => {}
             Command::Step => {
+                cancel.store(false, Ordering::SeqCst);
                 before = Some((sim.snapshot(), None));
                 match sim.step_guarded() {
                     Ok(report) => {
@@ -123,6 +136,7 @@ fn engine(
                     continue;
                 };
                 sim.restore(&snap);
+                cancel.store(false, Ordering::SeqCst);
                 let p = sim.params();
                 let text = format!(
                     "redo of step {} with gamma_K = {:e}, delta/h = {:e}, gamma_M = {:e}, tolerance = {:e}",
@@ -193,10 +207,12 @@ fn engine(
 pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
     let mut app = App::new(&sim, recorder.as_ref().map(|r| r.path().display().to_string()));
     let (cmd_tx, cmd_rx) = mpsc::channel();
+    let cancel = Arc::new(AtomicBool::new(false));
     let (up_tx, up_rx) = mpsc::channel();
-    let worker = std::thread::Builder::new()
-        .name("mpmlab-engine".into())
-        .spawn(move || engine(sim, recorder, cmd_rx, up_tx))?;
+    let worker = std::thread::Builder::new().name("mpmlab-engine".into()).spawn({
+        let cancel = cancel.clone();
+        move || engine(sim, recorder, cmd_rx, up_tx, cancel)
+    })?;
     // ratatui::init installs a panic hook that restores the terminal.
     let mut terminal = ratatui::init();
     let _ = ratatui::crossterm::execute!(std::io::stdout(), EnableMouseCapture);
@@ -228,8 +244,13 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
                     },
                     _ => None,
                 };
-                if let Some(cmd) = action.and_then(|a| app.apply(a)) {
-                    let _ = cmd_tx.send(cmd);
+                match action.and_then(|a| app.apply(a)) {
+                    // The engine is busy with the step: tell it through the flag.
+                    Some(Command::Cancel) => cancel.store(true, Ordering::SeqCst),
+                    Some(cmd) => {
+                        let _ = cmd_tx.send(cmd);
+                    }
+                    None => {}
                 }
             }
         }
