@@ -1,0 +1,95 @@
+//! The real binary in a pseudo-terminal (util-linux `script` provides it):
+//! keys go in, the screen text and the recording come out.
+
+mod common;
+use std::io::Write;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+/// Every text the recording's `events` log holds.
+fn events(path: &std::path::Path) -> Vec<String> {
+    let text = rerun::TextLog::descriptor_text().component;
+    common::read_chunks(path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| {
+            c.iter_slices::<String>(text)
+                .flat_map(|v| v.into_iter().map(|s| s.to_string()))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+#[test]
+fn step_tune_redo_and_quit_in_a_terminal() {
+    if Command::new("script").arg("--version").output().is_err() {
+        eprintln!("skipped: util-linux `script` is not installed");
+        return;
+    }
+    let rrd = common::temp_path("e2e", "rrd");
+    let cmd = format!(
+        "stty cols 100 rows 30; exec '{}' tui scenarios/elastic-beam-ghost.toml --record '{}'",
+        env!("CARGO_BIN_EXE_mpmlab"),
+        rrd.display()
+    );
+    let mut child = Command::new("script")
+        .args(["-qefc", &cmd, "/dev/null"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("TERM", "xterm-256color")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut keys = child.stdin.take().unwrap();
+    let mut press = |k: &str, wait_ms: u64| {
+        // A failed write means the program ended: the asserts below say why.
+        let _ = keys.write_all(k.as_bytes()).and_then(|_| keys.flush());
+        std::thread::sleep(Duration::from_millis(wait_ms));
+    };
+    std::thread::sleep(Duration::from_millis(800));
+    press(" ", 1500); // one load step
+    press("g", 300); // gamma_K / 10: a parameter change
+    press("r", 2000); // redo the step with it
+    press("\x1b", 300); // close the comparison
+    press("q", 300);
+    press("q", 300); // (a second q in case a step still ran)
+    drop(keys);
+    let out = child.wait_with_output().unwrap();
+    // The terminal output with escape sequences (cursor moves between
+    // words) turned into spaces, and runs of spaces collapsed.
+    let raw = String::from_utf8_lossy(&out.stdout);
+    let mut screen = String::new();
+    let mut chars = raw.chars().peekable();
+    while let Some(c) = chars.next() {
+        if c == '\x1b' {
+            if chars.peek() == Some(&'[') {
+                chars.next();
+                while let Some(d) = chars.next() {
+                    if d.is_ascii_alphabetic() || d == '~' {
+                        break;
+                    }
+                }
+            }
+            screen.push(' ');
+        } else {
+            screen.push(c);
+        }
+    }
+    let screen = screen.split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        out.status.success(),
+        "{:?}: {} {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr),
+        &screen[..screen.len().min(2000)]
+    );
+    assert!(screen.contains("elastic-beam-ghost"), "{screen}");
+    assert!(screen.contains("step 1/50"), "{screen}");
+    assert!(screen.contains("redo: before / after"), "{screen}");
+    let ev = events(&rrd);
+    let _ = std::fs::remove_file(&rrd);
+    assert!(ev.iter().any(|e| e.starts_with("parameter: gamma_K = 1.2e6")), "{ev:?}");
+    assert!(ev.iter().any(|e| e.starts_with("redo of step 1")), "{ev:?}");
+    assert!(ev.iter().any(|e| e.contains("end of interactive session")), "{ev:?}");
+}
