@@ -65,7 +65,7 @@ fn step_tune_redo_and_quit_in_a_terminal() {
         if c == '\x1b' {
             if chars.peek() == Some(&'[') {
                 chars.next();
-                while let Some(d) = chars.next() {
+                for d in chars.by_ref() {
                     if d.is_ascii_alphabetic() || d == '~' {
                         break;
                     }
