@@ -630,16 +630,61 @@ fn timestamp() -> String {
     )
 }
 
+/// The scenes of `dir` in the picker; `None` when the user quits.
+fn pick_scene(dir: &Path) -> Result<Option<PathBuf>> {
+    use mpmlab::tui::picker::{pick, Entry, Picker};
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    paths.sort();
+    let entries: Vec<Entry> = paths
+        .into_iter()
+        .filter_map(|path| {
+            let text = std::fs::read_to_string(&path).ok()?;
+            let s = Scene::parse(&text, &path.display().to_string()).ok()?;
+            Some(Entry {
+                path,
+                name: s.scene.name,
+                description: s.scene.description.split_whitespace().collect::<Vec<_>>().join(" "),
+            })
+        })
+        .collect();
+    let default = entries
+        .iter()
+        .position(|e| e.path == Path::new(DEFAULT_SCENE))
+        .unwrap_or(0);
+    let picker = Picker {
+        entries,
+        selected: default,
+        default,
+    };
+    Ok(pick(picker).context("terminal UI")?.map(|e| e.path))
+}
+
 fn tui(scene: Option<&Path>, record: Option<PathBuf>, no_record: bool) -> Result<ExitCode> {
     let (sim, text) = match scene {
         Some(p) => match load(p) {
             Ok(s) => s,
             Err(code) => return Ok(code),
         },
-        None if Path::new(DEFAULT_SCENE).exists() => match load(Path::new(DEFAULT_SCENE)) {
-            Ok(s) => s,
-            Err(code) => return Ok(code),
-        },
+        None if Path::new(DEFAULT_SCENE).exists() => {
+            // The scene picker, the default highlighted (only on a terminal).
+            use std::io::IsTerminal;
+            let path = if std::io::stdin().is_terminal() {
+                match pick_scene(Path::new("scenarios"))? {
+                    Some(p) => p,
+                    None => return Ok(ExitCode::SUCCESS),
+                }
+            } else {
+                PathBuf::from(DEFAULT_SCENE)
+            };
+            match load(&path) {
+                Ok(s) => s,
+                Err(code) => return Ok(code),
+            }
+        }
         None => match Simulation::from_scene_text(DEFAULT_SCENE_TEXT, DEFAULT_SCENE) {
             Ok(s) => (s, DEFAULT_SCENE_TEXT.to_string()),
             Err(e) => {

@@ -351,3 +351,42 @@ fn progress_is_shown_and_a_step_can_be_cancelled() {
     assert!(app.status.contains("cancelled"), "{}", app.status);
     assert_eq!(app.apply(Action::Step), Some(Command::Step));
 }
+
+#[test]
+fn scene_picker_highlights_the_default() {
+    use mpmlab::tui::picker::{draw as draw_picker, Entry, Picker};
+    let entry = |name: &str, d: &str| Entry {
+        path: format!("scenarios/{name}.toml").into(),
+        name: name.into(),
+        description: d.into(),
+    };
+    let mut p = Picker {
+        entries: vec![
+            entry("block-roller-0", "C 5.1"),
+            entry("column-small-strain", "column under self-weight"),
+            entry("funnel", "C 5.6"),
+        ],
+        selected: 1,
+        default: 1,
+    };
+    let render = |p: &Picker| {
+        let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+        t.draw(|f| draw_picker(f, p)).unwrap();
+        let buf = t.backend().buffer().clone();
+        (0..buf.area.height)
+            .map(|y| {
+                (0..buf.area.width)
+                    .map(|x| buf[(x, y)].symbol().to_string())
+                    .collect::<String>()
+            })
+            .collect::<Vec<_>>()
+    };
+    let lines = render(&p);
+    let all = lines.join("\n");
+    assert!(all.contains("> column-small-strain (default)"), "{all}");
+    assert!(all.contains("column under self-weight"), "{all}");
+    p.down();
+    p.down();
+    let all = render(&p).join("\n");
+    assert!(all.contains("> funnel") && all.contains("C 5.6"), "{all}");
+}

@@ -8,6 +8,7 @@
 
 pub mod app;
 pub mod draw;
+pub mod picker;
 pub mod sweep;
 
 use crate::field::Field;
