@@ -390,3 +390,113 @@ fn scene_picker_highlights_the_default() {
     let all = render(&p).join("\n");
     assert!(all.contains("> funnel") && all.contains("C 5.6"), "{all}");
 }
+
+#[test]
+fn parameters_are_typed_or_stepped() {
+    let sim = sim_with("elastic-beam-ghost", |_| {});
+    let mut app = App::new(&sim, None);
+    let type_in = |app: &mut App, text: &str| {
+        assert_eq!(app.apply(Action::OpenInput), None);
+        for c in text.chars() {
+            app.apply(Action::Type(c));
+        }
+        app.apply(Action::Submit)
+    };
+    assert_eq!(type_in(&mut app, "gamma_k = 5e5"), Some(Command::SetGammaK(5e5)));
+    assert_eq!(type_in(&mut app, "tolerance=1e-9"), Some(Command::SetTolerance(1e-9)));
+    assert_eq!(
+        type_in(&mut app, "max_iterations = 30"),
+        Some(Command::SetMaxIterations(30))
+    );
+    assert_eq!(type_in(&mut app, "delta_over_h = 2"), None);
+    assert!(app.status.contains("(0, 1]"), "{}", app.status);
+    assert_eq!(type_in(&mut app, "speed = 3"), None);
+    assert!(app.status.contains("unknown parameter"), "{}", app.status);
+    // The prompt shows what is typed; Esc drops it.
+    app.apply(Action::OpenInput);
+    app.apply(Action::Type('g'));
+    assert!(screen(&app).join("\n").contains("set: g_"));
+    app.apply(Action::CloseOverlay);
+    assert!(app.input.is_none());
+    // Tolerance in decades from the keyboard.
+    assert_eq!(app.apply(Action::LowerTolerance), Some(Command::SetTolerance(1e-7)));
+}
+
+/// Whole screens at the smallest supported and a large terminal.
+#[test]
+fn screens_at_two_sizes() {
+    let mut sim = sim_with("elastic-beam-ghost", |s| {
+        s.grid.h = 0.25;
+        s.analysis.gamma_k = 0.0;
+    });
+    let mut app = App::new(&sim, None);
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, &app)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let rows: Vec<String> = (0..h)
+            .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect())
+            .collect();
+        let all = rows.join("\n");
+        // Main screen: title, every panel, the key line; nothing cut at the edges.
+        for part in [
+            " points ",
+            " parameters ",
+            " last step ",
+            " steps ",
+            "space step",
+            "? help",
+        ] {
+            assert!(all.contains(part), "{w}x{h}: {part}\n{all}");
+        }
+        assert!(rows[0].contains("elastic-beam-ghost") && rows[0].contains("step 0/50"));
+        assert!(
+            rows[1].starts_with('┌') && rows[h as usize - 2].starts_with('└'),
+            "{all}"
+        );
+    }
+    // Help at both sizes lists every key.
+    app.apply(Action::ToggleHelp);
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, &app)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let all: String = (0..h)
+            .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect::<String>() + "\n")
+            .collect();
+        for key in [
+            "space",
+            "enter",
+            "redo",
+            "cancel",
+            "zoom",
+            "pan",
+            "gamma_M",
+            "tolerance",
+            "quit",
+        ] {
+            assert!(all.contains(key), "{w}x{h}: {key}\n{all}");
+        }
+    }
+    app.apply(Action::CloseOverlay);
+    // Failure panel at both sizes.
+    let failure = loop {
+        match sim.step() {
+            Ok(r) => app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field)))),
+            Err(f) => break f,
+        }
+    };
+    app.update(Update::Failed(failure));
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, &app)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let all: String = (0..h)
+            .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect::<String>() + "\n")
+            .collect();
+        assert!(
+            all.contains("step 12 failed") && all.contains("try:") && all.contains("redoes"),
+            "{w}x{h}\n{all}"
+        );
+    }
+}

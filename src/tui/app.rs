@@ -124,6 +124,14 @@ pub enum Action {
     Redo,
     /// Cancel the step being computed.
     Cancel,
+    /// Tolerance times / divided by 10.
+    RaiseTolerance,
+    LowerTolerance,
+    /// Open the parameter prompt (`name = value`), type into it, submit.
+    OpenInput,
+    Type(char),
+    Backspace,
+    Submit,
     CloseOverlay,
     NextField,
     Quit,
@@ -140,6 +148,10 @@ pub enum Command {
     SetDeltaOverH(f64),
     /// New ghost mass penalty `gamma_M` (from the next step).
     SetGammaM(f64),
+    /// New tolerance (from the next step).
+    SetTolerance(f64),
+    /// New Newton iteration limit (from the next step).
+    SetMaxIterations(usize),
     /// Restore the state before the last step and take it again.
     Redo,
     /// Stop the step being computed (handled by the UI loop through a flag
@@ -212,6 +224,8 @@ pub struct App {
     pub show_failure: bool,
     /// The latest residual of the step being computed.
     pub progress: Option<crate::simulation::Progress>,
+    /// The parameter prompt's text while it is open.
+    pub input: Option<String>,
 }
 
 /// A step's outcome.
@@ -253,6 +267,7 @@ impl App {
             redo: None,
             show_failure: false,
             progress: None,
+            input: None,
         }
     }
 
@@ -376,7 +391,48 @@ impl App {
                     None
                 }
             }
+            Action::RaiseTolerance | Action::LowerTolerance => {
+                let t = self.params.tolerance;
+                let new = if action == Action::RaiseTolerance {
+                    (10.0 * t).min(0.1)
+                } else {
+                    (t / 10.0).max(1e-16)
+                };
+                self.status = format!("tolerance = {new:.1e} from the next step");
+                Some(Command::SetTolerance(new))
+            }
+            Action::OpenInput => {
+                self.input = Some(String::new());
+                self.status = "type name = value (gamma_k, gamma_m, delta_over_h, tolerance, max_iterations), enter sets it, Esc cancels".into();
+                None
+            }
+            Action::Type(c) => {
+                if let Some(i) = self.input.as_mut() {
+                    i.push(c);
+                }
+                None
+            }
+            Action::Backspace => {
+                if let Some(i) = self.input.as_mut() {
+                    i.pop();
+                }
+                None
+            }
+            Action::Submit => {
+                let text = self.input.take().unwrap_or_default();
+                match parse_setting(&text) {
+                    Ok(cmd) => {
+                        self.status = format!("{} from the next step", text.trim());
+                        Some(cmd)
+                    }
+                    Err(e) => {
+                        self.status = e;
+                        None
+                    }
+                }
+            }
             Action::CloseOverlay => {
+                self.input = None;
                 self.show_help = false;
                 self.show_failure = false;
                 self.redo = None;
@@ -480,6 +536,42 @@ impl App {
             Update::Params(p) => self.params = p,
             Update::Message(m) => self.status = m,
         }
+    }
+}
+
+/// The command for a typed `name = value`.
+pub fn parse_setting(text: &str) -> Result<Command, String> {
+    let (name, value) = text
+        .split_once('=')
+        .ok_or_else(|| format!("`{}`: expected name = value", text.trim()))?;
+    let (name, value) = (name.trim(), value.trim());
+    let x: f64 = value.parse().map_err(|_| format!("`{value}` is not a number"))?;
+    let positive = |x: f64| {
+        if x > 0.0 && x.is_finite() {
+            Ok(x)
+        } else {
+            Err(format!("{name} must be positive"))
+        }
+    };
+    match name {
+        "gamma_k" | "gamma_K" if x >= 0.0 && x.is_finite() => Ok(Command::SetGammaK(x)),
+        "gamma_m" | "gamma_M" if x >= 0.0 && x.is_finite() => Ok(Command::SetGammaM(x)),
+        "gamma_k" | "gamma_K" | "gamma_m" | "gamma_M" => Err(format!("{name} must be zero or positive")),
+        "delta_over_h" | "delta/h" if x > 0.0 && x <= 1.0 => Ok(Command::SetDeltaOverH(x)),
+        "delta_over_h" | "delta/h" => Err("delta/h must lie in (0, 1]".into()),
+        "tolerance" if x > 0.0 && x < 1.0 => Ok(Command::SetTolerance(x)),
+        "tolerance" => Err("tolerance must lie in (0, 1)".into()),
+        "max_iterations" => {
+            let n = positive(x)?;
+            if n.fract() == 0.0 && n <= 1000.0 {
+                Ok(Command::SetMaxIterations(n as usize))
+            } else {
+                Err("max_iterations must be a whole number up to 1000".into())
+            }
+        }
+        other => Err(format!(
+            "unknown parameter `{other}` (gamma_k, gamma_m, delta_over_h, tolerance, max_iterations)"
+        )),
     }
 }
 

@@ -65,10 +65,16 @@ pub fn draw(frame: &mut Frame, app: &App) {
         .as_deref()
         .map(|r| format!("  rec: {r}"))
         .unwrap_or_default();
-    frame.render_widget(
-        Paragraph::new(format!(" {keys}  | {}{rec}", app.status)).style(Style::new().fg(Color::Gray)),
-        status,
-    );
+    match &app.input {
+        Some(text) => frame.render_widget(
+            Paragraph::new(format!(" set: {text}_   ({})", app.status)).style(Style::new().fg(Color::Yellow)),
+            status,
+        ),
+        None => frame.render_widget(
+            Paragraph::new(format!(" {keys}  | {}{rec}", app.status)).style(Style::new().fg(Color::Gray)),
+            status,
+        ),
+    }
     if let Some(r) = &app.redo {
         draw_redo(frame, area, r);
     } else if let (true, Some(f)) = (app.show_failure, &app.failure) {
@@ -777,6 +783,8 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("v       next chart: residual, condition, energy, error"),
         Line::raw("r       redo the last step with the current parameters"),
         Line::raw("x       cancel the step being computed"),
+        Line::raw("T / t   tolerance x10 / /10"),
+        Line::raw(":       type a parameter: gamma_k = 1e6, tolerance = 1e-9, ..."),
         Line::raw("+ / -   zoom the points (also the mouse wheel); z: fit"),
         Line::raw("arrows  pan (also h j k l)"),
         Line::raw("?       show or hide this help"),

@@ -47,6 +47,9 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('v') => Some(Action::NextChart),
         KeyCode::Char('r') => Some(Action::Redo),
         KeyCode::Char('x') => Some(Action::Cancel),
+        KeyCode::Char('T') => Some(Action::RaiseTolerance),
+        KeyCode::Char('t') => Some(Action::LowerTolerance),
+        KeyCode::Char(':') => Some(Action::OpenInput),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,
@@ -194,6 +197,22 @@ fn engine(
                 let text = format!("parameter: gamma_M = {g:e} kg/m^3 from step {}", sim.step_index() + 1);
                 set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
+            Command::SetTolerance(t) => {
+                let params = crate::simulation::Params {
+                    tolerance: t,
+                    ..sim.params().clone()
+                };
+                let text = format!("parameter: tolerance = {t:e} from step {}", sim.step_index() + 1);
+                set_params(&mut sim, &mut recorder, &updates, params, &text);
+            }
+            Command::SetMaxIterations(n) => {
+                let params = crate::simulation::Params {
+                    max_iterations: n,
+                    ..sim.params().clone()
+                };
+                let text = format!("parameter: max_iterations = {n} from step {}", sim.step_index() + 1);
+                set_params(&mut sim, &mut recorder, &updates, params, &text);
+            }
             Command::Quit => break,
         }
     }
@@ -236,6 +255,14 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
             let wait = if app.running { 2 } else { 50 };
             if event::poll(Duration::from_millis(wait))? {
                 let action = match event::read()? {
+                    // The parameter prompt takes the keys while it is open.
+                    Event::Key(k) if k.kind == KeyEventKind::Press && app.input.is_some() => match k.code {
+                        KeyCode::Char(c) => Some(Action::Type(c)),
+                        KeyCode::Backspace => Some(Action::Backspace),
+                        KeyCode::Enter => Some(Action::Submit),
+                        KeyCode::Esc => Some(Action::CloseOverlay),
+                        _ => None,
+                    },
                     Event::Key(k) if k.kind == KeyEventKind::Press => action_for(k.code),
                     // The mouse wheel zooms the canvas.
                     Event::Mouse(m) => match m.kind {
