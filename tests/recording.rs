@@ -245,3 +245,63 @@ fn an_interrupted_run_leaves_a_readable_recording() {
     // start, the interruption, and the end of the run.
     assert!(events >= 3, "{events} events");
 }
+
+/// The entity paths of a short recorded run of a shipped scene.
+fn entities_of(scene: &str, steps: usize) -> std::collections::BTreeSet<String> {
+    let mut sim = sim_with(scene, |s| s.analysis.condition_every = 1);
+    let text = std::fs::read_to_string(common::scene_path(scene)).unwrap();
+    let path = temp_path("rec-families", "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    for _ in 0..steps {
+        let r = sim.step().unwrap();
+        rec.log_step(&r, &sim).unwrap();
+    }
+    rec.event("parameter: test event", "INFO").unwrap();
+    rec.finish().unwrap();
+    let e = read_chunks(&path).iter().map(|c| c.entity_path().to_string()).collect();
+    let _ = std::fs::remove_file(&path);
+    e
+}
+
+#[test]
+fn every_entity_family_is_recorded() {
+    // Quasi-static with ghost stabilisation (G 5.5 beam).
+    let e = entities_of("elastic-beam-ghost", 2);
+    for f in [
+        "/scene",
+        "/grid",
+        "/grid/active",
+        "/grid/ghost_faces",
+        "/points",
+        "/events",
+        "/metrics/residual",
+        "/metrics/log10/residual",
+        "/metrics/condition/stiffness",
+        "/metrics/condition/stiffness_unstabilised",
+        "/metrics/energy/strain",
+        "/metrics/energy/external_work",
+        "/metrics/newton/iterations",
+        "/metrics/time/total",
+        "/metrics/unknowns",
+    ] {
+        assert!(e.contains(f), "beam: missing {f} in {e:?}");
+    }
+    // Explicit dynamics: energies, momentum and mass conditioning.
+    let e = entities_of("ghost-collision-elastic", 2);
+    for f in [
+        "/points",
+        "/grid/ghost_faces",
+        "/metrics/energy/kinetic",
+        "/metrics/energy/kinetic_grid",
+        "/metrics/energy/total",
+        "/metrics/energy/balance_error",
+        "/metrics/momentum/x",
+        "/metrics/condition/mass_stabilised",
+        "/metrics/condition/mass_consistent",
+        "/metrics/condition/mass_lumped",
+        "/metrics/cfl/stabilised",
+        "/events",
+    ] {
+        assert!(e.contains(f), "collision: missing {f} in {e:?}");
+    }
+}
