@@ -257,6 +257,22 @@ fn charts_fields_zoom_and_quit_confirmation() {
     assert_eq!(app.view.field, mpmlab::field::Field::Error);
     assert!(app.view.values.iter().all(|v| v.is_finite() && *v >= 0.0));
     assert!(screen(&app).join("\n").contains("error vs exact"));
+    // Layers: active cells drawn in blue only when asked.
+    let blue = |app: &App| {
+        let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+        t.draw(|f| draw(f, app)).unwrap();
+        t.backend()
+            .buffer()
+            .content
+            .iter()
+            .filter(|c| c.fg == ratatui::style::Color::Rgb(60, 120, 200))
+            .count()
+    };
+    assert_eq!(blue(&app), 0);
+    app.apply(Action::ToggleActive);
+    assert!(blue(&app) > 10);
+    app.apply(Action::ToggleGrid);
+    assert!(!app.show_grid);
     // Zoom and pan change the view; z fits again.
     app.apply(Action::ZoomIn);
     app.apply(Action::PanRight);

@@ -119,6 +119,10 @@ pub enum Action {
     ResetView,
     /// Next chart: residuals, condition numbers, energies, errors.
     NextChart,
+    /// Show or hide the grid lines, the active cells, the ghost faces.
+    ToggleGrid,
+    ToggleActive,
+    ToggleGhostFaces,
     /// Redo the last step (done or failed) from its snapshot with the
     /// current parameters, and compare.
     Redo,
@@ -226,6 +230,10 @@ pub struct App {
     pub progress: Option<crate::simulation::Progress>,
     /// The parameter prompt's text while it is open.
     pub input: Option<String>,
+    /// Canvas layers.
+    pub show_grid: bool,
+    pub show_active: bool,
+    pub show_ghost_faces: bool,
 }
 
 /// A step's outcome.
@@ -268,6 +276,9 @@ impl App {
             show_failure: false,
             progress: None,
             input: None,
+            show_grid: true,
+            show_active: false,
+            show_ghost_faces: true,
         }
     }
 
@@ -463,6 +474,18 @@ impl App {
                     _ => (0.0, -step),
                 };
                 self.pan = [self.pan[0] + dx, self.pan[1] + dy];
+                None
+            }
+            Action::ToggleGrid => {
+                self.show_grid = !self.show_grid;
+                None
+            }
+            Action::ToggleActive => {
+                self.show_active = !self.show_active;
+                None
+            }
+            Action::ToggleGhostFaces => {
+                self.show_ghost_faces = !self.show_ghost_faces;
                 None
             }
             Action::NextChart => {

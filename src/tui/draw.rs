@@ -246,15 +246,28 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
             let dense = g.nx + g.ny > 400;
             let step_i = if dense { g.nx.div_ceil(50).max(1) } else { 1 };
             let step_j = if dense { g.ny.div_ceil(50).max(1) } else { 1 };
-            for i in (0..=g.nx).step_by(step_i).chain([g.nx]) {
-                let x = g.origin[0] + i as f64 * g.h;
-                ctx.draw(&CLine::new(x, g.origin[1], x, max[1], grid_color));
-            }
-            for j in (0..=g.ny).step_by(step_j).chain([g.ny]) {
-                let y = g.origin[1] + j as f64 * g.h;
-                ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
+            if app.show_grid {
+                for i in (0..=g.nx).step_by(step_i).chain([g.nx]) {
+                    let x = g.origin[0] + i as f64 * g.h;
+                    ctx.draw(&CLine::new(x, g.origin[1], x, max[1], grid_color));
+                }
+                for j in (0..=g.ny).step_by(step_j).chain([g.ny]) {
+                    let y = g.origin[1] + j as f64 * g.h;
+                    ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
+                }
             }
             ctx.layer();
+            if app.show_active {
+                for &c in &app.view.active_cells {
+                    let m = g.cell_min(c % g.nx, c / g.nx);
+                    let (x0, y0, x1, y1) = (m[0], m[1], m[0] + g.h, m[1] + g.h);
+                    let col = Color::Rgb(60, 120, 200);
+                    ctx.draw(&CLine::new(x0, y0, x1, y0, col));
+                    ctx.draw(&CLine::new(x1, y0, x1, y1, col));
+                    ctx.draw(&CLine::new(x1, y1, x0, y1, col));
+                    ctx.draw(&CLine::new(x0, y1, x0, y0, col));
+                }
+            }
             for &c in &app.view.cut_cells {
                 let m = g.cell_min(c % g.nx, c / g.nx);
                 let (x0, y0, x1, y1) = (m[0], m[1], m[0] + g.h, m[1] + g.h);
@@ -269,8 +282,10 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                     ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], Color::Cyan));
                 }
             }
-            for (a, b) in &app.view.ghost_faces {
-                ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], Color::Rgb(240, 140, 20)));
+            if app.show_ghost_faces {
+                for (a, b) in &app.view.ghost_faces {
+                    ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], Color::Rgb(240, 140, 20)));
+                }
             }
             for bv in &app.view.boundaries {
                 let color = if bv.loaded { Color::LightRed } else { Color::White };
@@ -776,6 +791,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("enter   run continuously / pause"),
         Line::raw("f       colour points by the next field"),
         Line::raw("c       show or hide boundary control points"),
+        Line::raw("# a o   grid lines, active cells (blue), ghost faces (orange)"),
         Line::raw("G / g   gamma_K x10 / /10 (from the next step)"),
         Line::raw("0       ghost stabilisation off / back on"),
         Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
