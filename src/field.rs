@@ -9,8 +9,11 @@ pub enum Field {
     SigmaYy,
     SigmaXy,
     DisplacementMagnitude,
-    /// Plastic work dissipated per reference volume (J/m^3).
-    PlasticWork,
+    /// Accumulated plastic strain `sum |d e_p|`: for the perfectly plastic
+    /// von Mises return map the dissipation increment per reference volume
+    /// is `rho_y |d e_p|`, so it is the dissipated work over `V0 rho_y`
+    /// (zero for elastic materials).
+    PlasticStrain,
     /// Speed `|v|` (explicit dynamics; m/s).
     Speed,
     /// Error against the scene's exact solution: `|u - u_exact|` where the
@@ -25,7 +28,7 @@ impl Field {
         Field::SigmaXx,
         Field::SigmaXy,
         Field::DisplacementMagnitude,
-        Field::PlasticWork,
+        Field::PlasticStrain,
         Field::Speed,
         Field::Error,
     ];
@@ -36,7 +39,7 @@ impl Field {
             Field::SigmaYy => "sigma_yy (Pa)",
             Field::SigmaXy => "sigma_xy (Pa)",
             Field::DisplacementMagnitude => "|u| (m)",
-            Field::PlasticWork => "plastic work (J/m^3)",
+            Field::PlasticStrain => "plastic strain",
             Field::Speed => "|v| (m/s)",
             Field::Error => "error vs exact",
         }
@@ -49,7 +52,7 @@ impl Field {
             Field::SigmaYy => "sigma_yy",
             Field::SigmaXy => "sigma_xy",
             Field::DisplacementMagnitude => "displacement_magnitude",
-            Field::PlasticWork => "plastic_work",
+            Field::PlasticStrain => "plastic_strain",
             Field::Speed => "speed",
             Field::Error => "error",
         }
@@ -70,8 +73,13 @@ impl Field {
                     let u = pts.displacement(p);
                     u[0].hypot(u[1])
                 }
-                Field::PlasticWork if pts.vol0[p] > 0.0 => pts.dissipation[p] / pts.vol0[p],
-                Field::PlasticWork => 0.0,
+                Field::PlasticStrain => {
+                    let m = sim.model().bodies[pts.body[p]].material;
+                    match sim.model().yield_stress[m] {
+                        Some(y) if pts.vol0[p] > 0.0 => pts.dissipation[p] / (pts.vol0[p] * y),
+                        _ => 0.0,
+                    }
+                }
                 Field::Speed => pts.v[p][0].hypot(pts.v[p][1]),
                 Field::Error => 0.0,
             })

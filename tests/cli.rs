@@ -185,3 +185,50 @@ fn replay_opens_the_viewer_or_says_how_to_install_it() {
     let _ = std::fs::remove_dir_all(&empty);
     let _ = std::fs::remove_file(&rrd);
 }
+
+#[test]
+fn a_failed_run_leaves_a_readable_recording() {
+    // The plain GIMP beam (h = 0.25, 2x2 points) fails at step 12 (G Table
+    // 5): exit code 1, and the file holds the 11 steps and the failure.
+    let scene = temp_path("beam0", "toml");
+    let text = std::fs::read_to_string(common::scene_path("elastic-beam-ghost"))
+        .unwrap()
+        .replace("h = 0.5", "h = 0.25")
+        .replace("gamma_k = 12.0e6", "gamma_k = 0.0");
+    std::fs::write(&scene, text).unwrap();
+    let rrd = temp_path("failed", "rrd");
+    let (code, _, err) = mpmlab(&[
+        "run",
+        scene.to_str().unwrap(),
+        "--quiet",
+        "--record",
+        rrd.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("step 12 failed"), "{err}");
+    let chunks = common::read_chunks(&rrd);
+    let steps: std::collections::BTreeSet<i64> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/points")
+        .flat_map(|c| {
+            c.timelines()
+                .get(&rerun::TimelineName::from("step"))
+                .map(|t| t.times_raw().to_vec())
+                .unwrap_or_default()
+        })
+        .collect();
+    assert_eq!(steps, (0..=11).collect());
+    let text = rerun::TextLog::descriptor_text().component;
+    let events: Vec<String> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| {
+            c.iter_slices::<String>(text)
+                .flat_map(|v| v.into_iter().map(|s| s.to_string()))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(events.iter().any(|e| e.contains("step 12 failed")), "{events:?}");
+    let _ = std::fs::remove_file(&rrd);
+    let _ = std::fs::remove_file(&scene);
+}

@@ -21,14 +21,14 @@ fn events(path: &std::path::Path) -> Vec<String> {
 }
 
 #[test]
-fn step_tune_redo_and_quit_in_a_terminal() {
+fn step_change_delta_redo_and_quit_in_a_terminal() {
     if Command::new("script").arg("--version").output().is_err() {
         eprintln!("skipped: util-linux `script` is not installed");
         return;
     }
     let rrd = common::temp_path("e2e", "rrd");
     let cmd = format!(
-        "stty cols 100 rows 30; exec '{}' tui scenarios/elastic-beam-ghost.toml --record '{}'",
+        "stty cols 100 rows 30; exec '{}' tui scenarios/block-roller-30.toml --record '{}'",
         env!("CARGO_BIN_EXE_mpmlab"),
         rrd.display()
     );
@@ -48,8 +48,8 @@ fn step_tune_redo_and_quit_in_a_terminal() {
         std::thread::sleep(Duration::from_millis(wait_ms));
     };
     std::thread::sleep(Duration::from_millis(800));
-    press(" ", 1500); // one load step
-    press("g", 300); // gamma_K / 10: a parameter change
+    press(" ", 1500); // the load step
+    press("d", 300); // delta/h / 10: a parameter change
     press("r", 2000); // redo the step with it
     press("\x1b", 300); // close the comparison
     press("q", 300);
@@ -84,12 +84,12 @@ fn step_tune_redo_and_quit_in_a_terminal() {
         String::from_utf8_lossy(&out.stderr),
         &screen[..screen.len().min(2000)]
     );
-    assert!(screen.contains("elastic-beam-ghost"), "{screen}");
-    assert!(screen.contains("step 1/50"), "{screen}");
+    assert!(screen.contains("block-roller-30"), "{screen}");
+    assert!(screen.contains("step 1/1"), "{screen}");
     assert!(screen.contains("redo: before / after"), "{screen}");
     let ev = events(&rrd);
     let _ = std::fs::remove_file(&rrd);
-    assert!(ev.iter().any(|e| e.starts_with("parameter: gamma_K = 1.2e6")), "{ev:?}");
+    assert!(ev.iter().any(|e| e.starts_with("parameter: delta/h = 1e-7")), "{ev:?}");
     assert!(ev.iter().any(|e| e.starts_with("redo of step 1")), "{ev:?}");
     assert!(ev.iter().any(|e| e.contains("end of interactive session")), "{ev:?}");
 }

@@ -9,7 +9,7 @@
 //! | `scene` | TextDocument (the scene file) | static |
 //! | `grid` | LineStrips2D | static |
 //! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
-//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of every field (`sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_work`, `speed`, `error`) | every step |
+//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of every field (`sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | every step |
 //! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
 //! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | every step |
 //! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,cut_cells}` | Scalars | every step |
