@@ -28,7 +28,7 @@ use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
 use crate::linalg::{self, Condition, ConditionMethod, Factor};
-use crate::material::hencky::{right_stretch, Response};
+use crate::material::hencky::Response;
 use crate::newton::{be_matrix, increment_gradient};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
 use crate::simulation::{Energy, Simulation, StepFailure, StepReport, Timings};
@@ -209,20 +209,20 @@ fn scatter(map: &Mapping, free: &[f64]) -> Vec<P2> {
 
 /// Material responses to the nodal increments `du` (m) and the internal
 /// force `sum_p V0_p P_p grad S` on the free dofs.
-/// Per point (none for zero-volume points): `dF` and the material's response.
-type Responses = Vec<Option<(Matrix2<f64>, Response)>>;
+/// Per point: `dF` and the material's response (none for zero-volume points).
+type Responses = Vec<(Matrix2<f64>, Option<Response>)>;
 
 fn respond(sim: &Simulation, map: &Mapping, du: &[P2]) -> (Responses, Vec<f64>) {
     let pts = &sim.state.points;
     let mut fint = vec![0.0; map.dofs.n_free];
     let mut out = Vec::with_capacity(pts.len());
     for p in 0..pts.len() {
-        if pts.vol0[p] == 0.0 {
-            out.push(None);
-            continue;
-        }
         let st = &map.stencils[p];
         let df = increment_gradient(st, du);
+        if pts.vol0[p] == 0.0 {
+            out.push((df, None));
+            continue;
+        }
         let r = sim.hencky(p).respond_stress(&df, &be_matrix(pts.b_e[p]));
         for (n, _, g) in st.iter() {
             for i in 0..2 {
@@ -231,7 +231,7 @@ fn respond(sim: &Simulation, map: &Mapping, du: &[P2]) -> (Responses, Vec<f64>) 
                 }
             }
         }
-        out.push(Some((df, r)));
+        out.push((df, Some(r)));
     }
     (out, fint)
 }
@@ -432,25 +432,15 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
         }
         pts.x[p] = [pts.x[p][0] + dx[0], pts.x[p][1] + dx[1]];
         pts.v[p] = velocities[p];
-        let Some((df, r)) = &responses[p] else { continue };
+        let (df, r) = &responses[p];
         let stretch = (df - Matrix2::identity()).norm();
         if !(stretch <= strained.0) {
             strained = (stretch, p);
         }
-        let fo = pts.def_grad[p];
-        let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
-        pts.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
-        pts.vol[p] *= df.determinant();
-        let u = right_stretch(&f);
-        pts.lp[p] = [pts.lp0[p][0] * u[(0, 0)], pts.lp0[p][1] * u[(1, 1)]];
-        let s = r.tau / f.determinant();
-        pts.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
-        pts.szz[p] = s[(2, 2)];
-        pts.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
-        pts.dissipation[p] += r.dissipation * pts.vol0[p];
-        pts.yielding[p] = r.yielding;
-        dissipation += pts.dissipation[p];
-        strain += pts.vol0[p] * sim.hencky(p).stored_energy(&r.b_e);
+        if let Some((w, d)) = crate::newton::commit_point(sim, &mut pts, p, df, r.as_ref()) {
+            strain += w;
+            dissipation += d;
+        }
     }
     if let Some(p) = (0..pts.len()).find(|&p| !(pts.v[p][0].is_finite() && pts.v[p][1].is_finite())) {
         return Err(non_finite(step, &format!("velocity at point {p}")));

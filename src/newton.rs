@@ -46,6 +46,34 @@ pub(crate) fn be_matrix(b: [f64; 4]) -> Matrix3<f64> {
     Matrix3::new(b[0], b[2], 0.0, b[2], b[1], 0.0, 0.0, 0.0, b[3])
 }
 
+/// Commit point `p`'s deformation increment `df`: `F = dF F_n`,
+/// `V = det(dF) V_n`, GIMP domains `l = l_0 diag(U)` (`F = R U`), and with
+/// the material's response (points with volume) the Cauchy stress
+/// `s = tau / det F`, `b_e`, dissipation and yield flag. Returns the
+/// point's stored energy and its dissipation so far (J).
+pub(crate) fn commit_point(
+    sim: &Simulation,
+    pts: &mut crate::points::Points,
+    p: usize,
+    df: &Matrix2<f64>,
+    r: Option<&Response>,
+) -> Option<(f64, f64)> {
+    let fo = pts.def_grad[p];
+    let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
+    pts.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
+    pts.vol[p] *= df.determinant();
+    let (l0, u) = (pts.lp0[p], right_stretch(&f));
+    pts.lp[p] = [l0[0] * u[(0, 0)], l0[1] * u[(1, 1)]];
+    let r = r?;
+    let s = r.tau / f.determinant();
+    pts.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
+    pts.szz[p] = s[(2, 2)];
+    pts.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
+    pts.dissipation[p] += r.dissipation * pts.vol0[p];
+    pts.yielding[p] = r.yielding;
+    Some((pts.vol0[p] * sim.hencky(p).stored_energy(&r.b_e), pts.dissipation[p]))
+}
+
 pub(crate) struct Iterate {
     responses: Vec<Option<Response>>,
     fint_free: Vec<f64>,
@@ -304,23 +332,10 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         let u = st.interpolate(|n| du[n]);
         let df = increment_gradient(st, &du);
         pts.x[p] = [pts.x[p][0] + u[0], pts.x[p][1] + u[1]];
-        let fo = pts.def_grad[p];
-        let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
-        pts.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
-        pts.vol[p] *= df.determinant();
-        let l0 = pts.lp0[p];
-        let u_stretch = right_stretch(&f);
-        pts.lp[p] = [l0[0] * u_stretch[(0, 0)], l0[1] * u_stretch[(1, 1)]];
-        let Some(r) = &it.responses[p] else { continue };
-        let j = f.determinant();
-        let s = r.tau / j;
-        pts.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
-        pts.szz[p] = s[(2, 2)];
-        pts.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
-        pts.dissipation[p] += r.dissipation * pts.vol0[p];
-        pts.yielding[p] = r.yielding;
-        dissipation += pts.dissipation[p];
-        strain_energy += pts.vol0[p] * sim.hencky(p).stored_energy(&r.b_e);
+        if let Some((w, d)) = commit_point(sim, &mut pts, p, &df, it.responses[p].as_ref()) {
+            strain_energy += w;
+            dissipation += d;
+        }
     }
     crate::simulation::check_points(&sim.model.grid, &pts, step, &residuals)?;
     let mut work = 0.0;

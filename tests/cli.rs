@@ -2,21 +2,8 @@
 //! line and field; every shipped scene runs.
 
 mod common;
-use common::temp_path;
+use common::{mpmlab, temp_path};
 use std::process::Command;
-
-fn mpmlab(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 /// The patch scene with `from` replaced by `to`, written to a temp file.
 fn broken(from: &str, to: &str) -> std::path::PathBuf {
@@ -218,16 +205,7 @@ fn a_failed_run_leaves_a_readable_recording() {
         })
         .collect();
     assert_eq!(steps, (0..=11).collect());
-    let text = rerun::TextLog::descriptor_text().component;
-    let events: Vec<String> = chunks
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/events")
-        .flat_map(|c| {
-            c.iter_slices::<String>(text)
-                .flat_map(|v| v.into_iter().map(|s| s.to_string()))
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let events = common::events(&rrd);
     assert!(events.iter().any(|e| e.contains("step 12 failed")), "{events:?}");
     let _ = std::fs::remove_file(&rrd);
     let _ = std::fs::remove_file(&scene);

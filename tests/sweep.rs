@@ -2,23 +2,10 @@
 //! as rows, emitted jobs collected, and the SVG charts read back.
 
 mod common;
-use common::temp_path;
+use common::{mpmlab, temp_path};
 use mpmlab::sweep::{from_csv, rates, RunResult};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn mpmlab(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn table(dir: &Path) -> Vec<RunResult> {
     from_csv(&std::fs::read_to_string(dir.join("sweep.csv")).unwrap())

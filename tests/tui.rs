@@ -9,11 +9,16 @@ use ratatui::backend::TestBackend;
 use ratatui::Terminal;
 
 fn screen(app: &App) -> Vec<String> {
-    let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
+    screen_at(app, 100, 30)
+}
+
+/// The screen's rows at a terminal of `w x h` cells.
+fn screen_at(app: &App, w: u16, h: u16) -> Vec<String> {
+    let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
     t.draw(|f| draw(f, app)).unwrap();
     let buf = t.backend().buffer().clone();
-    (0..buf.area.height)
-        .map(|y| (0..buf.area.width).map(|x| buf[(x, y)].symbol().to_string()).collect())
+    (0..h)
+        .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect())
         .collect()
 }
 
@@ -447,12 +452,7 @@ fn screens_at_two_sizes() {
     });
     let mut app = App::new(&sim, None);
     for (w, h) in [(100u16, 30u16), (160, 48)] {
-        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
-        t.draw(|f| draw(f, &app)).unwrap();
-        let buf = t.backend().buffer().clone();
-        let rows: Vec<String> = (0..h)
-            .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect())
-            .collect();
+        let rows = screen_at(&app, w, h);
         let all = rows.join("\n");
         // Main screen: title, every panel, the key line; nothing cut at the edges.
         for part in [
@@ -474,12 +474,7 @@ fn screens_at_two_sizes() {
     // Help at both sizes lists every key.
     app.apply(Action::ToggleHelp);
     for (w, h) in [(100u16, 30u16), (160, 48)] {
-        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
-        t.draw(|f| draw(f, &app)).unwrap();
-        let buf = t.backend().buffer().clone();
-        let all: String = (0..h)
-            .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect::<String>() + "\n")
-            .collect();
+        let all = screen_at(&app, w, h).join("\n");
         for key in [
             "space",
             "enter",
@@ -504,12 +499,7 @@ fn screens_at_two_sizes() {
     };
     app.update(Update::Failed(failure));
     for (w, h) in [(100u16, 30u16), (160, 48)] {
-        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
-        t.draw(|f| draw(f, &app)).unwrap();
-        let buf = t.backend().buffer().clone();
-        let all: String = (0..h)
-            .map(|y| (0..w).map(|x| buf[(x, y)].symbol().to_string()).collect::<String>() + "\n")
-            .collect();
+        let all = screen_at(&app, w, h).join("\n");
         assert!(
             all.contains("step 12 failed") && all.contains("try:") && all.contains("redoes"),
             "{w}x{h}\n{all}"

@@ -6,20 +6,6 @@ use std::io::Write;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-/// Every text the recording's `events` log holds.
-fn events(path: &std::path::Path) -> Vec<String> {
-    let text = rerun::TextLog::descriptor_text().component;
-    common::read_chunks(path)
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/events")
-        .flat_map(|c| {
-            c.iter_slices::<String>(text)
-                .flat_map(|v| v.into_iter().map(|s| s.to_string()))
-                .collect::<Vec<_>>()
-        })
-        .collect()
-}
-
 #[test]
 fn step_change_delta_redo_and_quit_in_a_terminal() {
     if Command::new("script").arg("--version").output().is_err() {
@@ -87,7 +73,7 @@ fn step_change_delta_redo_and_quit_in_a_terminal() {
     assert!(screen.contains("block-roller-30"), "{screen}");
     assert!(screen.contains("step 1/1"), "{screen}");
     assert!(screen.contains("redo: before / after"), "{screen}");
-    let ev = events(&rrd);
+    let ev = common::events(&rrd);
     let _ = std::fs::remove_file(&rrd);
     assert!(ev.iter().any(|e| e.starts_with("parameter: delta/h = 1e-7")), "{ev:?}");
     assert!(ev.iter().any(|e| e.starts_with("redo of step 1")), "{ev:?}");

@@ -77,26 +77,7 @@ pub fn record_sweep(path: &Path, summary: &str, results: &[RunResult], h_key: Op
     }
     // Error against h, one line per group of the other settings.
     if let Some(h) = h_key {
-        let mut groups: Vec<(String, Vec<&RunResult>)> = Vec::new();
-        for r in &done {
-            let label: Vec<String> = r
-                .settings
-                .iter()
-                .filter(|(k, _)| k != h)
-                .map(|(k, v)| format!("{k}={v}"))
-                .collect();
-            let label = if label.is_empty() {
-                "runs".into()
-            } else {
-                label.join("_")
-            };
-            match groups.iter_mut().find(|g| g.0 == label) {
-                Some(g) => g.1.push(r),
-                None => groups.push((label, vec![r])),
-            }
-        }
-        for (label, mut g) in groups {
-            g.sort_by(|a, b| b.setting(h).partial_cmp(&a.setting(h)).unwrap());
+        for (label, g) in crate::sweep::groups_without(results, h) {
             let line: Vec<[f32; 2]> = g
                 .iter()
                 .filter_map(|r| log10_point(r.setting(h)?, r.error()?))

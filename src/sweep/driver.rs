@@ -277,29 +277,11 @@ fn draw(folder: &Folder, title: &str, results: &[RunResult]) -> Result<Vec<std::
             ),
         )?;
         if let Some(h) = h_key(results) {
-            let mut groups: Vec<(String, Vec<&RunResult>)> = Vec::new();
-            for r in &done {
-                let label: Vec<String> = r
-                    .settings
-                    .iter()
-                    .filter(|(k, _)| *k != h)
-                    .map(|(k, v)| format!("{k}={v}"))
-                    .collect();
-                let label = if label.is_empty() {
-                    "runs".to_string()
-                } else {
-                    label.join(" ")
-                };
-                match groups.iter_mut().find(|g| g.0 == label) {
-                    Some(g) => g.1.push(r),
-                    None => groups.push((label, vec![r])),
-                }
-            }
+            let groups = super::groups_without(results, &h);
             let series: Vec<Series> = groups
                 .into_iter()
                 .enumerate()
-                .map(|(k, (label, mut g))| {
-                    g.sort_by(|a, b| b.setting(&h).partial_cmp(&a.setting(&h)).unwrap());
+                .map(|(k, (label, g))| {
                     let (first, last) = (g[0], g[g.len() - 1]);
                     let rate = match (first.setting(&h), last.setting(&h), first.error(), last.error()) {
                         (Some(h1), Some(h2), Some(e1), Some(e2)) if h1 != h2 && e1 > 0.0 && e2 > 0.0 => {

@@ -572,23 +572,40 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
         .collect()
 }
 
+/// Completed runs that set `key`, grouped by every other setting (in
+/// first-seen order; label `k=v k2=v2`, or `runs` when `key` is the only
+/// setting), each group ordered by `key` from largest to smallest.
+pub fn groups_without<'a>(results: &'a [RunResult], key: &str) -> Vec<(String, Vec<&'a RunResult>)> {
+    let mut groups: Vec<(String, Vec<&RunResult>)> = Vec::new();
+    for r in results.iter().filter(|r| r.completed && r.setting(key).is_some()) {
+        let label: Vec<String> = r
+            .settings
+            .iter()
+            .filter(|(k, _)| k != key)
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        let label = if label.is_empty() {
+            "runs".to_string()
+        } else {
+            label.join(" ")
+        };
+        match groups.iter_mut().find(|g| g.0 == label) {
+            Some(g) => g.1.push(r),
+            None => groups.push((label, vec![r])),
+        }
+    }
+    for g in &mut groups {
+        g.1.sort_by(|a, b| b.setting(key).partial_cmp(&a.setting(key)).unwrap());
+    }
+    groups
+}
+
 /// Observed convergence rates `log(e1/e2) / log(h1/h2)` between successive
 /// refinements of `h`, in each group of runs that share every other
 /// setting: `(group label, h1, h2, error name, rate)`.
 pub fn rates(results: &[RunResult], h_key: &str) -> Vec<(String, f64, f64, String, f64)> {
-    let mut groups: BTreeMap<String, Vec<&RunResult>> = BTreeMap::new();
-    for r in results.iter().filter(|r| r.completed && r.setting(h_key).is_some()) {
-        let label: Vec<String> = r
-            .settings
-            .iter()
-            .filter(|(k, _)| k != h_key)
-            .map(|(k, v)| format!("{k}={v}"))
-            .collect();
-        groups.entry(label.join(" ")).or_default().push(r);
-    }
     let mut out = Vec::new();
-    for (label, mut g) in groups {
-        g.sort_by(|a, b| b.setting(h_key).partial_cmp(&a.setting(h_key)).unwrap());
+    for (label, g) in groups_without(results, h_key) {
         for w in g.windows(2) {
             let (h1, h2) = (w[0].setting(h_key).unwrap(), w[1].setting(h_key).unwrap());
             for (name, e1) in &w[0].errors {

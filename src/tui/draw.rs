@@ -346,7 +346,7 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
 
 /// Residual per iteration, log10, for the last few steps (newest brightest).
 fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
-    use ratatui::widgets::{Axis, Chart, Dataset, GraphType};
+    use ratatui::widgets::{Dataset, GraphType};
     let mut series: Vec<Vec<(f64, f64)>> = app
         .reports
         .iter()
@@ -402,29 +402,33 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
                 .data(s)
         })
         .collect();
-    let chart = Chart::new(datasets)
-        .block(
-            Block::default()
-                .borders(Borders::ALL)
-                .title(" residual per iteration (log10; v: next chart) "),
-        )
-        .x_axis(
-            Axis::default()
-                .bounds([0.0, xmax])
-                .labels(["0".to_string(), format!("{xmax}")]),
-        )
-        .y_axis(
-            Axis::default()
-                .bounds([ymin, ymax])
-                .labels([format!("1e{ymin}"), format!("1e{ymax}")]),
-        );
+    let chart = framed(
+        datasets,
+        " residual per iteration (log10; v: next chart) ".into(),
+        ([0.0, xmax], ["0".into(), format!("{xmax}")]),
+        ([ymin, ymax], [format!("1e{ymin}"), format!("1e{ymax}")]),
+    );
     frame.render_widget(chart, area);
+}
+
+/// A chart in a bordered block, each axis with its bounds and end labels.
+fn framed<'a>(
+    datasets: Vec<ratatui::widgets::Dataset<'a>>,
+    title: String,
+    x: ([f64; 2], [String; 2]),
+    y: ([f64; 2], [String; 2]),
+) -> ratatui::widgets::Chart<'a> {
+    use ratatui::widgets::{Axis, Chart};
+    Chart::new(datasets)
+        .block(Block::default().borders(Borders::ALL).title(title))
+        .x_axis(Axis::default().bounds(x.0).labels(x.1))
+        .y_axis(Axis::default().bounds(y.0).labels(y.1))
 }
 
 /// Per-step series: condition numbers (log10, with and without ghost),
 /// energies (strain, external work, plastic dissipation) or errors (log10).
 fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
-    use ratatui::widgets::{Axis, Chart, Dataset, GraphType, LegendPosition};
+    use ratatui::widgets::{Dataset, GraphType, LegendPosition};
     let log = |v: f64| (v > 0.0 && v.is_finite()).then(|| v.log10());
     let colors = [Color::Cyan, Color::Yellow, Color::Red, Color::Green, Color::Magenta];
     /// A named series of `(step, value)`.
@@ -533,27 +537,25 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
         })
         .collect();
     let empty = datasets.is_empty();
-    let chart = Chart::new(datasets)
-        .block(Block::default().borders(Borders::ALL).title(if empty {
+    let chart = framed(
+        datasets,
+        if empty {
             format!("{title}— nothing yet (v: next chart) ")
         } else {
             format!("{title}(v: next chart) ")
-        }))
-        .x_axis(
-            Axis::default()
-                .bounds([1.0, xmax])
-                .labels(["1".to_string(), format!("{xmax}")]),
-        )
-        .y_axis(Axis::default().bounds([ymin, ymax]).labels([label(ymin), label(ymax)]))
-        .legend_position(Some(LegendPosition::TopLeft))
-        .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1)));
+        },
+        ([1.0, xmax], ["1".into(), format!("{xmax}")]),
+        ([ymin, ymax], [label(ymin), label(ymax)]),
+    )
+    .legend_position(Some(LegendPosition::TopLeft))
+    .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1)));
     frame.render_widget(chart, area);
 }
 
 /// Energies against time (explicit dynamics): kinetic, strain, plastic
 /// dissipation and their sum, as G Figs. 13-14 chart them.
 fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
-    use ratatui::widgets::{Axis, Chart, Dataset, GraphType};
+    use ratatui::widgets::{Dataset, GraphType};
     type Part = (&'static str, Color, fn(&StepReport) -> f64);
     let parts: [Part; 4] = [
         ("kinetic", Color::Cyan, |r| r.energy.kinetic),
@@ -587,22 +589,12 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
                 .data(s)
         })
         .collect();
-    let chart = Chart::new(datasets)
-        .block(
-            Block::default()
-                .borders(Borders::ALL)
-                .title(" energy (J) against time (s) "),
-        )
-        .x_axis(
-            Axis::default()
-                .bounds([0.0, tmax])
-                .labels(["0".to_string(), format!("{tmax:.3}")]),
-        )
-        .y_axis(
-            Axis::default()
-                .bounds([0.0, 1.05 * emax])
-                .labels(["0".to_string(), format!("{:.3e}", 1.05 * emax)]),
-        );
+    let chart = framed(
+        datasets,
+        " energy (J) against time (s) ".into(),
+        ([0.0, tmax], ["0".into(), format!("{tmax:.3}")]),
+        ([0.0, 1.05 * emax], ["0".into(), format!("{:.3e}", 1.05 * emax)]),
+    );
     frame.render_widget(chart, area);
 }
 

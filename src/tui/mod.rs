@@ -176,44 +176,36 @@ fn engine(
                 field = f;
                 let _ = updates.send(Update::View(Box::new(View::of(&sim, field))));
             }
-            Command::SetGammaK(g) => {
-                let params = crate::simulation::Params {
-                    gamma_k: g,
-                    ..sim.params().clone()
+            Command::SetGammaK(_)
+            | Command::SetDeltaOverH(_)
+            | Command::SetGammaM(_)
+            | Command::SetTolerance(_)
+            | Command::SetMaxIterations(_) => {
+                let mut params = sim.params().clone();
+                let what = match cmd {
+                    Command::SetGammaK(g) => {
+                        params.gamma_k = g;
+                        format!("gamma_K = {g:e} Pa")
+                    }
+                    Command::SetDeltaOverH(d) => {
+                        params.delta_over_h = d;
+                        format!("delta/h = {d:e}")
+                    }
+                    Command::SetGammaM(g) => {
+                        params.gamma_m = g;
+                        format!("gamma_M = {g:e} kg/m^3")
+                    }
+                    Command::SetTolerance(t) => {
+                        params.tolerance = t;
+                        format!("tolerance = {t:e}")
+                    }
+                    Command::SetMaxIterations(n) => {
+                        params.max_iterations = n;
+                        format!("max_iterations = {n}")
+                    }
+                    _ => continue, // not a parameter (matched above)
                 };
-                let text = format!("parameter: gamma_K = {g:e} Pa from step {}", sim.step_index() + 1);
-                set_params(&mut sim, &mut recorder, &updates, params, &text);
-            }
-            Command::SetDeltaOverH(d) => {
-                let params = crate::simulation::Params {
-                    delta_over_h: d,
-                    ..sim.params().clone()
-                };
-                let text = format!("parameter: delta/h = {d:e} from step {}", sim.step_index() + 1);
-                set_params(&mut sim, &mut recorder, &updates, params, &text);
-            }
-            Command::SetGammaM(g) => {
-                let params = crate::simulation::Params {
-                    gamma_m: g,
-                    ..sim.params().clone()
-                };
-                let text = format!("parameter: gamma_M = {g:e} kg/m^3 from step {}", sim.step_index() + 1);
-                set_params(&mut sim, &mut recorder, &updates, params, &text);
-            }
-            Command::SetTolerance(t) => {
-                let params = crate::simulation::Params {
-                    tolerance: t,
-                    ..sim.params().clone()
-                };
-                let text = format!("parameter: tolerance = {t:e} from step {}", sim.step_index() + 1);
-                set_params(&mut sim, &mut recorder, &updates, params, &text);
-            }
-            Command::SetMaxIterations(n) => {
-                let params = crate::simulation::Params {
-                    max_iterations: n,
-                    ..sim.params().clone()
-                };
-                let text = format!("parameter: max_iterations = {n} from step {}", sim.step_index() + 1);
+                let text = format!("parameter: {what} from step {}", sim.step_index() + 1);
                 set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
             Command::Quit => break,

@@ -236,30 +236,18 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
         frame.render_widget(Paragraph::new("h is not varied in this sweep").block(block), area);
         return;
     };
-    let mut groups: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    for r in v.results.iter().filter(|r| r.completed) {
-        let label: Vec<String> = r
-            .settings
-            .iter()
-            .filter(|(k, _)| k != h)
-            .map(|(k, v)| format!("{k}={v}"))
-            .collect();
-        let label = if label.is_empty() {
-            "runs".into()
-        } else {
-            label.join(" ")
-        };
-        let Some(p) = (|| Some((lg(r.setting(h)?)?, lg(r.error()?)?)))() else {
-            continue;
-        };
-        match groups.iter_mut().find(|g| g.0 == label) {
-            Some(g) => g.1.push(p),
-            None => groups.push((label, vec![p])),
-        }
-    }
-    for g in &mut groups {
-        g.1.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
-    }
+    // Each group's points from fine to coarse (log10 h, log10 error).
+    let groups: Vec<(String, Vec<(f64, f64)>)> = crate::sweep::groups_without(&v.results, h)
+        .into_iter()
+        .map(|(label, g)| {
+            let mut pts: Vec<(f64, f64)> = g
+                .iter()
+                .filter_map(|r| Some((lg(r.setting(h)?)?, lg(r.error()?)?)))
+                .collect();
+            pts.reverse();
+            (label, pts)
+        })
+        .collect();
     let xs: Vec<f64> = groups.iter().flat_map(|g| g.1.iter().map(|p| p.0)).collect();
     let ys: Vec<f64> = groups.iter().flat_map(|g| g.1.iter().map(|p| p.1)).collect();
     let (xb, xl) = axis(&xs);

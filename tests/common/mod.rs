@@ -61,3 +61,31 @@ pub fn read_chunks(path: &std::path::Path) -> Vec<rerun::log::Chunk> {
         })
         .collect()
 }
+
+/// Run the `mpmlab` binary in the crate folder: exit code, stdout, stderr.
+pub fn mpmlab(args: &[&str]) -> (i32, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Every text of a recording's `events` log, in file order.
+pub fn events(path: &std::path::Path) -> Vec<String> {
+    let text = rerun::TextLog::descriptor_text().component;
+    read_chunks(path)
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| {
+            c.iter_slices::<String>(text)
+                .flat_map(|v| v.into_iter().map(|s| s.to_string()))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
