@@ -257,26 +257,21 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                 }
             }
             ctx.layer();
-            if app.show_active {
-                for &c in &app.view.active_cells {
+            // Outlines of cells `c` in a colour.
+            let outline = |ctx: &mut ratatui::widgets::canvas::Context, cells: &[usize], col: Color| {
+                for &c in cells {
                     let m = g.cell_min(c % g.nx, c / g.nx);
                     let (x0, y0, x1, y1) = (m[0], m[1], m[0] + g.h, m[1] + g.h);
-                    let col = Color::Rgb(60, 120, 200);
                     ctx.draw(&CLine::new(x0, y0, x1, y0, col));
                     ctx.draw(&CLine::new(x1, y0, x1, y1, col));
                     ctx.draw(&CLine::new(x1, y1, x0, y1, col));
                     ctx.draw(&CLine::new(x0, y1, x0, y0, col));
                 }
+            };
+            if app.show_active {
+                outline(ctx, &app.view.active_cells, Color::Rgb(60, 120, 200));
             }
-            for &c in &app.view.cut_cells {
-                let m = g.cell_min(c % g.nx, c / g.nx);
-                let (x0, y0, x1, y1) = (m[0], m[1], m[0] + g.h, m[1] + g.h);
-                let col = Color::Rgb(0, 110, 120);
-                ctx.draw(&CLine::new(x0, y0, x1, y0, col));
-                ctx.draw(&CLine::new(x1, y0, x1, y1, col));
-                ctx.draw(&CLine::new(x1, y1, x0, y1, col));
-                ctx.draw(&CLine::new(x0, y1, x0, y0, col));
-            }
+            outline(ctx, &app.view.cut_cells, Color::Rgb(0, 110, 120));
             for line in &app.view.ibm {
                 for w in line.windows(2) {
                     ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], Color::Cyan));
