@@ -230,9 +230,9 @@ fn dynamics_row(r: &StepReport) -> String {
     let d = r.dynamics.as_ref().expect("a dynamics report");
     let e = &r.energy;
     let balance = if d.initial_energy > 0.0 {
-        d.energy_error / d.initial_energy
+        format!("{:.3e}", d.energy_error / d.initial_energy)
     } else {
-        d.energy_error
+        "-".to_string()
     };
     let c = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3e}"));
     let cond = d.conditioning.as_ref();
@@ -242,7 +242,7 @@ fn dynamics_row(r: &StepReport) -> String {
         mpmlab::scene::MassKind::Lumped => c.cfl_lumped,
     });
     let mut s = format!(
-        "{:>6} {:>9.4} {:>8} {:>11.4e} {:>11.4e} {:>11.4e} {:>11.3e} {:>10} {:>10} {:>10} {:>10}",
+        "{:>6} {:>9.4} {:>8} {:>11.4e} {:>11.4e} {:>11.4e} {:>11} {:>10} {:>10} {:>10} {:>10}",
         r.step,
         d.time,
         r.unknowns,

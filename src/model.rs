@@ -437,6 +437,21 @@ impl Model {
 
         if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
             validate_explicit(a, &dirichlet)?;
+            // Explicit dynamics divides by mass: every material needs density.
+            if let Some(k) = materials.iter().position(|m| !(m.density > 0.0)) {
+                return Err(FieldError::new(
+                    format!("material[{k}].density"),
+                    "explicit dynamics needs a positive density",
+                ));
+            }
+            // Static exact solutions grow with the load factor; explicit
+            // loads act in full from the start, so only free motion applies.
+            if matches!(scene.exact, Some(ref e) if !matches!(e, ExactSpec::FreeMotion {})) {
+                return Err(FieldError::new(
+                    "exact.name",
+                    "explicit dynamics supports the free-motion exact solution only",
+                ));
+            }
         } else if a.duration.is_some() {
             return Err(FieldError::new(
                 "analysis.duration",

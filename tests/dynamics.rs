@@ -337,3 +337,22 @@ fn populated_cells_leave_domain_only_nodes_unheld() {
         assert!(c.mass_stabilised.value < 1e3, "{:e}", c.mass_stabilised.value);
     }
 }
+
+#[test]
+fn explicit_scenes_need_density_and_free_motion_exact_solutions() {
+    let path = common::scene_path("ghost-collision-elastic");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let build = |t: &str| {
+        mpmlab::Model::from_text(t, "x.toml")
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    let e = build(&text.replace("density = 1000.0", "density = 0.0")).unwrap_err();
+    assert!(
+        e.contains("material[0].density") && e.contains("positive density"),
+        "{e}"
+    );
+    let e = build(&(text.clone() + "\n[exact]\nname = \"simple-shear\"\nshear = 0.1\nx0 = 0.0\n")).unwrap_err();
+    assert!(e.contains("free-motion exact solution only"), "{e}");
+    assert!(build(&text).is_ok());
+}

@@ -213,3 +213,40 @@ fn bad_sweep_arguments_are_clear_errors() {
     assert_eq!(code, 2);
     assert!(err.contains("key=value1,value2"), "{err}");
 }
+
+#[test]
+fn an_edited_scene_reruns_and_values_keep_their_spaces_out() {
+    let dir = temp_path("sweep-stale", "d");
+    let base = temp_path("base", "toml");
+    let text = std::fs::read_to_string(common::scene_path("column-small-strain")).unwrap();
+    std::fs::write(&base, &text).unwrap();
+    let sweep = || {
+        mpmlab(&[
+            "sweep",
+            base.to_str().unwrap(),
+            "--vary",
+            "h=1.0",
+            "--vary",
+            "grid.origin=[0.0, 0.0]",
+            "--out",
+            dir.to_str().unwrap(),
+        ])
+    };
+    let (code, out, err) = sweep();
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("1 runs, 0 already done"), "{out}");
+    // The bracketed value survives the run's header (spaces dropped).
+    let row = &table(&dir)[0];
+    assert!(row.completed, "{row:?}");
+    assert_eq!(row.settings[1], ("grid.origin".into(), "[0.0,0.0]".into()));
+    // Unchanged: nothing reruns. Edited base scene: the stale result goes.
+    let (_, out, _) = sweep();
+    assert!(out.contains("1 runs, 1 already done"), "{out}");
+    std::fs::write(&base, text.replace("load_steps = 1", "load_steps = 2")).unwrap();
+    let (code, out, _) = sweep();
+    assert_eq!(code, 0);
+    assert!(out.contains("1 runs, 0 already done"), "{out}");
+    assert_eq!(table(&dir)[0].steps_total, 2);
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&base);
+}

@@ -439,8 +439,8 @@ fn parameters_are_typed_or_stepped() {
     assert!(screen(&app).join("\n").contains("set: g_"));
     app.apply(Action::CloseOverlay);
     assert!(app.input.is_none());
-    // Tolerance in decades from the keyboard.
-    assert_eq!(app.apply(Action::LowerTolerance), Some(Command::SetTolerance(1e-7)));
+    // Tolerance in decades from the keyboard, from the value typed above.
+    assert_eq!(app.apply(Action::LowerTolerance), Some(Command::SetTolerance(1e-10)));
 }
 
 /// Whole screens at the smallest supported and a large terminal.
@@ -505,4 +505,19 @@ fn screens_at_two_sizes() {
             "{w}x{h}\n{all}"
         );
     }
+}
+
+#[test]
+fn gamma_k_steps_from_a_scale_even_for_stress_free_scenes() {
+    // stretching-ghost has E = 0: gamma_K still rises from 0 (scale 1 Pa),
+    // and repeated presses compound before the engine answers.
+    let sim = sim_with("stretching-ghost", |_| {});
+    let mut app = App::new(&sim, None);
+    match app.apply(Action::RaiseGammaK) {
+        Some(Command::SetGammaK(g)) => assert!(g > 0.0 && g.is_finite()),
+        other => panic!("{other:?}"),
+    }
+    let g0 = app.params.gamma_m;
+    app.apply(Action::RaiseGammaM);
+    assert_eq!(app.apply(Action::RaiseGammaM), Some(Command::SetGammaM(100.0 * g0)));
 }

@@ -133,8 +133,10 @@ pub fn record_sweep(path: &Path, summary: &str, results: &[RunResult], h_key: Op
         };
         let label = if r.completed {
             format!("{}: completed", r.id)
-        } else {
+        } else if r.failed_step > 0 {
             format!("{}: fails at step {}", r.id, r.failed_step)
+        } else {
+            format!("{}: invalid ({})", r.id, r.failure)
         };
         cells.push(([j as f32, -(i as f32)], color, label));
     }

@@ -25,12 +25,27 @@ pub fn prepare(folder: &Folder, base: &str, fixed: &[(String, String)], varies: 
     for r in &runs {
         let text = run_scene(base, fixed, r)?;
         let p = folder.run_scene(&r.id);
+        // A changed scene (base or fixed settings edited) makes an old
+        // result stale: drop it so the run is done again.
+        if std::fs::read_to_string(&p).is_ok_and(|old| old != text) {
+            let _ = std::fs::remove_file(folder.result(&r.id));
+            let _ = remove_row(folder, &r.id);
+        }
         std::fs::write(&p, text).map_err(|e| io("cannot write", &p, e))?;
     }
     let order: Vec<&str> = runs.iter().map(|r| r.id.as_str()).collect();
     let p = folder.0.join("runs.txt");
     std::fs::write(&p, order.join("\n") + "\n").map_err(|e| io("cannot write", &p, e))?;
     Ok(runs)
+}
+
+/// Drop a run's row from `sweep.csv`.
+fn remove_row(folder: &Folder, id: &str) -> std::io::Result<()> {
+    let Ok(text) = std::fs::read_to_string(folder.csv()) else {
+        return Ok(());
+    };
+    let rows: Vec<RunResult> = super::from_csv(&text).into_iter().filter(|r| r.id != id).collect();
+    std::fs::write(folder.csv(), to_csv(&rows))
 }
 
 /// The runs without a result yet (restart: finished runs are not redone).
@@ -86,7 +101,7 @@ pub fn execute(folder: &Folder, exe: &Path, runs: &[Run], jobs: usize, progress:
                         let r = RunResult {
                             id: run.id.clone(),
                             settings: run.settings.clone(),
-                            failure: format!("the run process ended without a result ({status:?})"),
+                            failure: format!("{} ({status:?})", super::DIED),
                             condition: f64::NAN,
                             ..Default::default()
                         };
@@ -120,7 +135,11 @@ pub fn finish(folder: &Folder, title: &str) -> Result<String, String> {
         .map(|t| t.lines().map(str::to_string).collect())
         .unwrap_or_default();
     let mut results: Vec<RunResult> = order.iter().filter_map(|id| all.remove(id)).collect();
-    results.extend(all.into_values());
+    // Without a run list (results gathered from elsewhere) take them all;
+    // with one, rows of earlier sweeps in the same folder stay out.
+    if order.is_empty() {
+        results.extend(all.into_values());
+    }
     let p = folder.csv();
     std::fs::write(&p, to_csv(&results)).map_err(|e| io("cannot write", &p, e))?;
     let charts = draw(folder, title, &results)?;

@@ -59,8 +59,8 @@ fn split_values(s: &str) -> Vec<String> {
     for c in s.chars() {
         match c {
             '"' => quoted = !quoted,
-            '[' if !quoted => depth += 1,
-            ']' if !quoted => depth -= 1,
+            '[' | '{' if !quoted => depth += 1,
+            ']' | '}' if !quoted => depth -= 1,
             ',' if !quoted && depth == 0 => {
                 out.push(cur.trim().to_string());
                 cur.clear();
@@ -231,7 +231,13 @@ pub fn run_scene(base: &str, fixed: &[(String, String)], run: &Run) -> Result<St
         apply(&mut t, k, v)?;
     }
     let body = toml::to_string(&t).map_err(|e| e.to_string())?;
-    let settings: Vec<String> = run.settings.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    // Whitespace separates the settings in the header: values lose theirs
+    // (`[1.0, 2.0]` -> `[1.0,2.0]`, the same TOML value).
+    let settings: Vec<String> = run
+        .settings
+        .iter()
+        .map(|(k, v)| format!("{k}={}", v.split_whitespace().collect::<String>()))
+        .collect();
     Ok(format!("{HEADER}id={} {}\n{body}", run.id, settings.join(" ")))
 }
 
@@ -321,7 +327,7 @@ pub fn run_file(path: &Path) -> RunResult {
     r.steps_total = sim.load_steps();
     let start = Instant::now();
     while !sim.finished() {
-        match sim.step() {
+        match sim.step_guarded() {
             Ok(rep) => {
                 let t = rep.timings;
                 r.assembly_s += t.assembly;
@@ -621,6 +627,9 @@ pub fn rates(results: &[RunResult], h_key: &str) -> Vec<(String, f64, f64, Strin
     out
 }
 
+/// How the row of a run whose process died without a result begins.
+pub const DIED: &str = "the run process ended without a result";
+
 /// Where a sweep keeps its files.
 pub struct Folder(pub PathBuf);
 
@@ -645,7 +654,8 @@ impl Folder {
     }
 
     /// Every result in `results/` and `sweep.csv`, by id (a result file
-    /// wins over an older row of the table).
+    /// wins over an older row of the table). Rows of runs whose process
+    /// died without a result are left out, so they run again.
     pub fn collect(&self) -> BTreeMap<String, RunResult> {
         let mut all = BTreeMap::new();
         if let Ok(t) = std::fs::read_to_string(self.csv()) {
@@ -662,6 +672,7 @@ impl Folder {
                 }
             }
         }
+        all.retain(|_, r| !r.failure.starts_with(DIED));
         all
     }
 }

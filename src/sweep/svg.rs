@@ -257,7 +257,7 @@ pub fn stability_map(title: &str, results: &[RunResult]) -> String {
         } else if r.failed_step > 0 {
             ("#d1495b", format!("fails at step {}", r.failed_step))
         } else {
-            ("#888888", "not run".to_string())
+            ("#888888", "invalid".to_string())
         };
         let _ = write!(
             s,

@@ -257,9 +257,9 @@ impl App {
             last_gamma: if sim.params().gamma_k > 0.0 {
                 sim.params().gamma_k
             } else {
-                sim.model().materials[0].e
+                modulus(sim)
             },
-            modulus: sim.model().materials[0].e,
+            modulus: modulus(sim),
             status: String::new(),
             quit: false,
             running: false,
@@ -300,7 +300,23 @@ impl App {
     }
 
     /// Apply a user action; returns the command for the engine, if any.
+    /// Parameter changes take effect in the shown parameters at once, so
+    /// repeated presses during a step compound (the engine applies them in
+    /// order from the next step).
     pub fn apply(&mut self, action: Action) -> Option<Command> {
+        let cmd = self.act(action);
+        match cmd {
+            Some(Command::SetGammaK(g)) => self.params.gamma_k = g,
+            Some(Command::SetDeltaOverH(d)) => self.params.delta_over_h = d,
+            Some(Command::SetGammaM(g)) => self.params.gamma_m = g,
+            Some(Command::SetTolerance(t)) => self.params.tolerance = t,
+            Some(Command::SetMaxIterations(n)) => self.params.max_iterations = n,
+            _ => {}
+        }
+        cmd
+    }
+
+    fn act(&mut self, action: Action) -> Option<Command> {
         match action {
             Action::Step => {
                 if self.busy {
@@ -595,6 +611,17 @@ pub fn parse_setting(text: &str) -> Result<Command, String> {
         other => Err(format!(
             "unknown parameter `{other}` (gamma_k, gamma_m, delta_over_h, tolerance, max_iterations)"
         )),
+    }
+}
+
+/// The scale of `gamma_K` shown and stepped from: the stiffest material's
+/// Young's modulus (1 Pa when every material is stress-free).
+fn modulus(sim: &Simulation) -> f64 {
+    let e = sim.model().materials.iter().map(|m| m.e).fold(0.0, f64::max);
+    if e > 0.0 {
+        e
+    } else {
+        1.0
     }
 }
 

@@ -606,12 +606,12 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport) -> Vec<Li
             e.kinetic, e.strain, e.plastic_dissipation
         )),
         Line::raw(format!(
-            "balance {:.3e} J ({:.2e} of W0 = {:.4e} J)  max grid speed {:.3e} m/s",
+            "balance {:.3e} J ({} of W0 = {:.4e} J)  max grid speed {:.3e} m/s",
             d.energy_error,
             if d.initial_energy > 0.0 {
-                d.energy_error / d.initial_energy
+                format!("{:.2e}", d.energy_error / d.initial_energy)
             } else {
-                f64::NAN
+                "-".to_string()
             },
             d.initial_energy,
             d.max_speed
@@ -749,7 +749,7 @@ fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
             Cell::from(r.unknowns.to_string()),
             Cell::from(match &r.dynamics {
                 Some(d) if d.initial_energy > 0.0 => format!("{:.1e}", d.energy_error / d.initial_energy),
-                Some(d) => format!("{:.1e}", d.energy_error),
+                Some(_) => "-".to_string(),
                 None => format!("{:.1e}", r.residuals.last().copied().unwrap_or(f64::NAN)),
             }),
             Cell::from(r.condition.map_or("-".into(), |c| format!("{:.1e}", c.value))),

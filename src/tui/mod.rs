@@ -232,23 +232,35 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
     let mut terminal = ratatui::init();
     let _ = ratatui::crossterm::execute!(std::io::stdout(), EnableMouseCapture);
     let result = (|| -> std::io::Result<()> {
+        // Redraw only when something changed: an update or an input.
+        let mut dirty = true;
         while !app.quit {
             while let Ok(u) = up_rx.try_recv() {
                 // A caught engine panic has run ratatui's panic hook, which
                 // restored the terminal: take it back.
-                let reinit = matches!(&u, Update::Failed(crate::simulation::StepFailure::Internal { .. }));
+                let reinit = match &u {
+                    Update::Failed(f) => matches!(f, crate::simulation::StepFailure::Internal { .. }),
+                    Update::Redone(o, _) => matches!(o.1, Err(crate::simulation::StepFailure::Internal { .. })),
+                    _ => false,
+                };
                 app.update(u);
+                dirty = true;
                 if reinit {
                     terminal = ratatui::init();
+                    let _ = ratatui::crossterm::execute!(std::io::stdout(), EnableMouseCapture);
                 }
             }
             if let Some(cmd) = app.pending() {
                 let _ = cmd_tx.send(cmd);
             }
-            terminal.draw(|f| draw::draw(f, &app))?;
+            if dirty {
+                terminal.draw(|f| draw::draw(f, &app))?;
+                dirty = false;
+            }
             // While running, come back quickly for the next step's update.
             let wait = if app.running { 2 } else { 50 };
             if event::poll(Duration::from_millis(wait))? {
+                dirty = true;
                 let action = match event::read()? {
                     // The parameter prompt takes the keys while it is open.
                     Event::Key(k) if k.kind == KeyEventKind::Press && app.input.is_some() => match k.code {
@@ -281,7 +293,8 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
     })();
     let _ = ratatui::crossterm::execute!(std::io::stdout(), DisableMouseCapture);
     ratatui::restore();
-    // Let the engine finish its step and close the recording.
+    // Stop a running step at its next residual, then close the recording.
+    cancel.store(true, Ordering::SeqCst);
     let _ = cmd_tx.send(Command::Quit);
     drop(cmd_tx);
     let _ = worker.join();
