@@ -52,30 +52,7 @@ enum Cmd {
     },
     /// Run a scene over the cross product of settings (or a preset of a
     /// paper study): a CSV row per run, rates, Pareto front, SVG charts.
-    Sweep {
-        /// Scene file (not with --preset or --collect).
-        scene: Option<PathBuf>,
-        /// `key=v1,v2,...`; keys: h, ppc, delta_over_h, gamma_k, gamma_m,
-        /// steps, tolerance, mass, ... or a dotted scene path
-        /// (`analysis.max_iterations`, `body.0.basis`).
-        #[arg(long = "vary", value_name = "KEY=V1,V2,...")]
-        vary: Vec<String>,
-        /// A paper study: plate-hole-h, delta, beam-stability, column-gamma.
-        #[arg(long, conflicts_with = "scene")]
-        preset: Option<String>,
-        /// Runs at a time (each single-threaded, in its own process).
-        #[arg(long, default_value_t = 1)]
-        jobs: usize,
-        /// Sweep folder (default sweeps/<scene or preset>).
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Write one command per pending run to <out>/jobs.txt instead of running.
-        #[arg(long)]
-        emit_jobs: bool,
-        /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
-        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
-        collect: Option<PathBuf>,
-    },
+    Sweep(SweepArgs),
     /// Run one scene of a sweep and write its result row (used by `sweep`
     /// and by emitted job lists).
     SweepRun {
@@ -108,23 +85,7 @@ fn main() -> ExitCode {
         Some(Cmd::Run { scene, record, quiet }) => run(&scene, record.as_deref(), quiet),
         Some(Cmd::Check { scene }) => check(&scene),
         Some(Cmd::List { dir }) => list(&dir),
-        Some(Cmd::Sweep {
-            scene,
-            vary,
-            preset,
-            jobs,
-            out,
-            emit_jobs,
-            collect,
-        }) => sweep(SweepArgs {
-            scene,
-            vary,
-            preset,
-            jobs,
-            out,
-            emit_jobs,
-            collect,
-        }),
+        Some(Cmd::Sweep(args)) => sweep(args),
         Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
         Some(Cmd::Replay { recording }) => replay(&recording),
         Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
@@ -477,13 +438,30 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
     Ok(code)
 }
 
+/// Arguments of `mpmlab sweep`.
+#[derive(clap::Args)]
 struct SweepArgs {
+    /// Scene file (not with --preset or --collect).
     scene: Option<PathBuf>,
+    /// `key=v1,v2,...`; keys: h, ppc, delta_over_h, gamma_k, gamma_m,
+    /// steps, tolerance, mass, ... or a dotted scene path
+    /// (`analysis.max_iterations`, `body.0.basis`).
+    #[arg(long = "vary", value_name = "KEY=V1,V2,...")]
     vary: Vec<String>,
+    /// A paper study: plate-hole-h, delta, beam-stability, column-gamma.
+    #[arg(long, conflicts_with = "scene")]
     preset: Option<String>,
+    /// Runs at a time (each single-threaded, in its own process).
+    #[arg(long, default_value_t = 1)]
     jobs: usize,
+    /// Sweep folder (default sweeps/<scene or preset>).
+    #[arg(long)]
     out: Option<PathBuf>,
+    /// Write one command per pending run to <out>/jobs.txt instead of running.
+    #[arg(long)]
     emit_jobs: bool,
+    /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     collect: Option<PathBuf>,
 }
 

@@ -341,7 +341,7 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
 
 /// Residual per iteration, log10, for the last few steps (newest brightest).
 fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
-    use ratatui::widgets::{Dataset, GraphType};
+    use ratatui::widgets::Dataset;
     let mut series: Vec<Vec<(f64, f64)>> = app
         .reports
         .iter()
@@ -386,15 +386,15 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
         .iter()
         .enumerate()
         .map(|(k, s)| {
-            Dataset::default()
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .style(Style::new().fg(if k == 0 && app.failure.is_some() {
+            line(
+                "",
+                if k == 0 && app.failure.is_some() {
                     Color::Red
                 } else {
                     colors[k.min(4)]
-                }))
-                .data(s)
+                },
+                s,
+            )
         })
         .collect();
     let chart = framed(
@@ -404,6 +404,20 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
         ([ymin, ymax], [format!("1e{ymin}"), format!("1e{ymax}")]),
     );
     frame.render_widget(chart, area);
+}
+
+/// A named line series (an empty name shows no legend entry).
+fn line<'a>(name: &str, color: Color, data: &'a [(f64, f64)]) -> ratatui::widgets::Dataset<'a> {
+    let d = ratatui::widgets::Dataset::default()
+        .marker(Marker::Braille)
+        .graph_type(ratatui::widgets::GraphType::Line)
+        .style(Style::new().fg(color))
+        .data(data);
+    if name.is_empty() {
+        d
+    } else {
+        d.name(name.to_string())
+    }
 }
 
 /// A chart in a bordered block, each axis with its bounds and end labels.
@@ -423,7 +437,7 @@ fn framed<'a>(
 /// Per-step series: condition numbers (log10, with and without ghost),
 /// energies (strain, external work, plastic dissipation) or errors (log10).
 fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
-    use ratatui::widgets::{Dataset, GraphType, LegendPosition};
+    use ratatui::widgets::{Dataset, LegendPosition};
     let log = |v: f64| (v > 0.0 && v.is_finite()).then(|| v.log10());
     let colors = [Color::Cyan, Color::Yellow, Color::Red, Color::Green, Color::Magenta];
     /// A named series of `(step, value)`.
@@ -522,14 +536,7 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
     let datasets: Vec<Dataset> = series
         .iter()
         .enumerate()
-        .map(|(k, (name, data))| {
-            Dataset::default()
-                .name(name.clone())
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .style(Style::new().fg(colors[k % colors.len()]))
-                .data(data)
-        })
+        .map(|(k, (name, data))| line(name, colors[k % colors.len()], data))
         .collect();
     let empty = datasets.is_empty();
     let chart = framed(
@@ -550,7 +557,7 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
 /// Energies against time (explicit dynamics): kinetic, strain, plastic
 /// dissipation and their sum, as G Figs. 13-14 chart them.
 fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
-    use ratatui::widgets::{Dataset, GraphType};
+    use ratatui::widgets::Dataset;
     type Part = (&'static str, Color, fn(&StepReport) -> f64);
     let parts: [Part; 4] = [
         ("kinetic", Color::Cyan, |r| r.energy.kinetic),
@@ -575,14 +582,7 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
     let datasets: Vec<Dataset> = parts
         .iter()
         .zip(&series)
-        .map(|((name, color, _), s)| {
-            Dataset::default()
-                .name(*name)
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .style(Style::new().fg(*color))
-                .data(s)
-        })
+        .map(|((name, color, _), s)| line(name, *color, s))
         .collect();
     let chart = framed(
         datasets,
