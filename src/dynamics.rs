@@ -29,7 +29,7 @@ use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
 use crate::linalg::{self, Condition, ConditionMethod, Factor};
 use crate::material::hencky::Response;
-use crate::newton::{be_matrix, increment_gradient};
+use crate::newton::{be_matrix, blocks_of, increment_gradient};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
 use crate::simulation::{Energy, Simulation, StepFailure, StepReport, Timings};
 use faer::sparse::linalg::solvers::SymbolicLlt;
@@ -141,11 +141,6 @@ fn group_mass(map: &Mapping, b: usize, masses: &[f64], out: &mut Vec<f64>) {
     }
 }
 
-/// Assembly blocks: point groups, then ghost faces.
-fn blocks<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
-    crate::newton::blocks_of(map, faces)
-}
-
 /// The reduced consistent mass plus `gamma_m J_G` (lower triangle).
 fn consistent_mass(
     map: &Mapping,
@@ -207,6 +202,19 @@ fn scatter(map: &Mapping, free: &[f64]) -> Vec<P2> {
     nodal
 }
 
+/// Grid velocities on the free dofs from point masses and velocities:
+/// `M v = sum_p m_p S_p^T v_p` (G (10)).
+fn map_velocities(map: &Mapping, mass: &MassSolver, masses: &[f64], velocities: &[P2]) -> Vec<f64> {
+    let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
+    for (p, s) in map.stencils.iter().enumerate() {
+        for (n, w, _) in s.iter() {
+            momentum[n][0] += w * masses[p] * velocities[p][0];
+            momentum[n][1] += w * masses[p] * velocities[p][1];
+        }
+    }
+    mass.solve(&gather(map, &momentum))
+}
+
 /// Material responses to the nodal increments `du` (m) and the internal
 /// force `sum_p V0_p P_p grad S` on the free dofs.
 /// Per point: `dF` and the material's response (none for zero-volume points).
@@ -258,7 +266,7 @@ fn factorise_mass(
         let d = lumped_mass(map, masses);
         return Ok((MassSolver::Lumped(d), false));
     }
-    let blocks = blocks(map, faces);
+    let blocks = blocks_of(map, faces);
     let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
     let reused = sim.mass_cache.pattern.is_some() && sim.mass_cache.key == key;
     if !reused {
@@ -343,14 +351,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
     // 3. Momentum to grid velocities.
     let t = Instant::now();
     let pts = &sim.state.points;
-    let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
-    for p in 0..pts.len() {
-        for (n, w, _) in map.stencils[p].iter() {
-            momentum[n][0] += w * pts.mass[p] * pts.v[p][0];
-            momentum[n][1] += w * pts.mass[p] * pts.v[p][1];
-        }
-    }
-    let v0 = mass.solve(&gather(&map, &momentum));
+    let v0 = map_velocities(&map, &mass, &pts.mass, &pts.v);
     if v0.iter().any(|v| !v.is_finite()) {
         return Err(non_finite(step, "grid velocity from the momentum"));
     }
@@ -407,14 +408,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
         StressUpdate::Musl => {
             // Sulsky's modified USL: the strain increment from the updated
             // point velocities mapped back to the grid with the same mass.
-            let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
-            for p in 0..old.len() {
-                for (n, w, _) in map.stencils[p].iter() {
-                    momentum[n][0] += w * old.mass[p] * velocities[p][0];
-                    momentum[n][1] += w * old.mass[p] * velocities[p][1];
-                }
-            }
-            let v = scatter(&map, &mass.solve(&gather(&map, &momentum)));
+            let v = scatter(&map, &map_velocities(&map, &mass, &old.mass, &velocities));
             let du: Vec<P2> = v.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
             respond(sim, &map, &du).0
         }
@@ -707,7 +701,7 @@ fn cfl(h: f64, lambda_max: f64) -> Option<f64> {
 fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Conditioning {
     let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
     let masses = &sim.state.points.mass;
-    let blocks = blocks(map, faces);
+    let blocks = blocks_of(map, faces);
     let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
     let mc = consistent_mass(map, &pattern, &blocks, faces, masses, 0.0);
     let ms = consistent_mass(map, &pattern, &blocks, faces, masses, sim.params.gamma_m);
@@ -778,7 +772,7 @@ impl Simulation {
         let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
         let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
         let mut c = conditioning_on(self, &map, &faces);
-        let blocks = blocks(&map, &faces);
+        let blocks = blocks_of(&map, &faces);
         let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower);
         let it = crate::newton::evaluate(self, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()]);
         let (mode, limit) = (self.params.condition, self.params.dense_limit);
@@ -803,19 +797,12 @@ impl Simulation {
         let solver = if kind == MassKind::Lumped {
             MassSolver::Lumped(lumped_mass(&map, &pts.mass))
         } else {
-            let blocks = blocks(&map, &faces);
+            let blocks = blocks_of(&map, &faces);
             let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
             let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, self.params.gamma_m);
             MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
         };
-        let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
-        for p in 0..pts.len() {
-            for (n, w, _) in map.stencils[p].iter() {
-                momentum[n][0] += w * pts.mass[p] * pts.v[p][0];
-                momentum[n][1] += w * pts.mass[p] * pts.v[p][1];
-            }
-        }
-        let v = scatter(&map, &solver.solve(&gather(&map, &momentum)));
+        let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));
         Ok((0..v.len())
             .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
             .map(|n| (n, v[n]))

@@ -658,63 +658,8 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
                     r.step, r.load_steps, r.unknowns
                 )));
                 lines.extend(dynamics_lines(r, d));
-                let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
-                if !e.is_empty() {
-                    lines.push(Line::raw(format!("errors: {}", e.join("  "))));
-                }
-                frame.render_widget(
-                    Paragraph::new(lines)
-                        .wrap(Wrap { trim: true })
-                        .block(Block::default().borders(Borders::ALL).title(" last step ")),
-                    area,
-                );
-                return;
-            }
-            let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.2e}")).collect();
-            lines.push(Line::raw(format!(
-                "step {}/{}  load factor {:.3}  unknowns {}",
-                r.step, r.load_steps, r.load_factor, r.unknowns
-            )));
-            lines.push(Line::raw(format!(
-                "residuals [{}]  |r0| {:.3e} N",
-                res.join(", "),
-                r.residual_norm
-            )));
-            match &r.condition {
-                Some(c) => lines.push(Line::raw(format!(
-                    "cond(K) {:.3e} ({})  lambda {:.2e}..{:.2e}",
-                    c.value,
-                    c.method.label(),
-                    c.lambda_min,
-                    c.lambda_max
-                ))),
-                None => lines.push(Line::raw("cond(K) off")),
-            }
-            lines.push(Line::raw(format!(
-                "energy: strain {:.4e} J  work {:.4e} J",
-                r.energy.strain, r.energy.external_work
-            )));
-            let t = &r.timings;
-            lines.push(Line::raw(format!(
-                "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
-                t.assembly, t.factorisation, t.solve, t.condition
-            )));
-            for b in &r.ibm {
-                lines.push(Line::raw(format!(
-                    "{} (IBM): R ({:.3e}, {:.3e}) N, violation {:.1e} m, {} cells cut",
-                    b.name, b.reaction[0], b.reaction[1], b.violation, b.cut_cells
-                )));
-            }
-            for b in &r.boundaries {
-                lines.push(Line::raw(format!(
-                    "{}: L {:.4} m, {} cells, F ({:.3e}, {:.3e}) N{}",
-                    b.name,
-                    b.length,
-                    b.cells_cut,
-                    b.resultant[0],
-                    b.resultant[1],
-                    if b.lost > 0.0 { " LOST LOAD" } else { "" }
-                )));
+            } else {
+                static_lines(r, &mut lines);
             }
             if !r.errors.is_empty() {
                 let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
@@ -728,6 +673,57 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
             .block(Block::default().borders(Borders::ALL).title(" last step ")),
         area,
     );
+}
+
+/// The quasi-static lines of the last-step panel: residuals, condition
+/// number, energies, timings, boundaries.
+fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
+    let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.2e}")).collect();
+    lines.push(Line::raw(format!(
+        "step {}/{}  load factor {:.3}  unknowns {}",
+        r.step, r.load_steps, r.load_factor, r.unknowns
+    )));
+    lines.push(Line::raw(format!(
+        "residuals [{}]  |r0| {:.3e} N",
+        res.join(", "),
+        r.residual_norm
+    )));
+    match &r.condition {
+        Some(c) => lines.push(Line::raw(format!(
+            "cond(K) {:.3e} ({})  lambda {:.2e}..{:.2e}",
+            c.value,
+            c.method.label(),
+            c.lambda_min,
+            c.lambda_max
+        ))),
+        None => lines.push(Line::raw("cond(K) off")),
+    }
+    lines.push(Line::raw(format!(
+        "energy: strain {:.4e} J  work {:.4e} J",
+        r.energy.strain, r.energy.external_work
+    )));
+    let t = &r.timings;
+    lines.push(Line::raw(format!(
+        "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
+        t.assembly, t.factorisation, t.solve, t.condition
+    )));
+    for b in &r.ibm {
+        lines.push(Line::raw(format!(
+            "{} (IBM): R ({:.3e}, {:.3e}) N, violation {:.1e} m, {} cells cut",
+            b.name, b.reaction[0], b.reaction[1], b.violation, b.cut_cells
+        )));
+    }
+    for b in &r.boundaries {
+        lines.push(Line::raw(format!(
+            "{}: L {:.4} m, {} cells, F ({:.3e}, {:.3e}) N{}",
+            b.name,
+            b.length,
+            b.cells_cut,
+            b.resultant[0],
+            b.resultant[1],
+            if b.lost > 0.0 { " LOST LOAD" } else { "" }
+        )));
+    }
 }
 
 fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
