@@ -11,7 +11,9 @@
 //! `(grad D) N`. Outside the band `D = I` and points keep the ordinary `B`;
 //! the band (width `delta`, typically 1e-6 h) is integrated separately with
 //! Gauss points along each piece of boundary in a cell and 3 across,
-//! adding `B1^T C B2 + B2^T C B1 + B2^T C B2` (C (18)-(27)). Prescribed
+//! adding `B_bar^T C B_bar - B^T C B`: the terms `K2 + K2^T + K3` of
+//! C (18)-(27), and the difference between `K1` with `D` and the points'
+//! `K1`, which integrates the band with `D = I`. Prescribed
 //! values go on the nodes of the cells the boundary cuts (B footnote 3) and
 //! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`.
 
@@ -426,20 +428,29 @@ impl<'a> IbmStep<'a> {
     /// Strain operator rows of a point: `B_bar` (for `d`) per stencil node,
     /// and the plain `B` (for `d^a`).
     pub fn point_b(&self, st: &Stencil, x: P2) -> (Vec<Op>, Vec<Op>) {
-        let plain: Vec<[[f64; 2]; 3]> = st
-            .iter()
-            .map(|(_, _, g)| [[g[0], 0.0], [0.0, g[1]], [g[1], g[0]]])
-            .collect();
+        let plain = plain_b(st);
         if !in_band(self.bs, x, self.delta) {
             return (plain.clone(), plain);
         }
         let (d, g) = d_total(self.bs, x, self.delta);
-        let bb = b_bar(st, &d, &g)
-            .into_iter()
-            .map(|(b1, b2)| [0, 1, 2].map(|r| [b1[r][0] + b2[r][0], b1[r][1] + b2[r][1]]))
-            .collect();
-        (bb, plain)
+        let (b1, b2): (Vec<Op>, Vec<Op>) = b_bar(st, &d, &g).into_iter().unzip();
+        (add_ops(&b1, 1.0, &b2), plain)
     }
+}
+
+/// The plain strain operator `B` of a stencil, per node.
+pub fn plain_b(st: &Stencil) -> Vec<Op> {
+    st.iter()
+        .map(|(_, _, g)| [[g[0], 0.0], [0.0, g[1]], [g[1], g[0]]])
+        .collect()
+}
+
+/// `a + s b`, node by node.
+pub fn add_ops(a: &[Op], s: f64, b: &[Op]) -> Vec<Op> {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| [0, 1, 2].map(|r| [x[r][0] + s * y[r][0], x[r][1] + s * y[r][1]]))
+        .collect()
 }
 
 /// `sum_rows A^T C B` for per-node 3 x 2 operators: adds `w A^T C B` into

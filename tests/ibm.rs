@@ -46,11 +46,13 @@ fn block_roller_stresses_at_any_inclination() {
             "{angle} deg: stress_l2 {es:.4e}, displacement_l2 {eu:.4e}, cond {:.3e}",
             r.condition.unwrap().value
         );
-        // The implicit boundary costs an O(delta/h) error here (a band of
-        // width delta with D < 1 stores slightly different energy; see the
-        // delta sweep): with delta = 1e-6 h the errors are ~2e-6. C Table 1
-        // reports ~1e-8 at the same delta; see docs/verification.md.
-        assert!(es < 1e-5 && eu < 1e-6, "{angle}: {es:e} {eu:e}");
+        // The implicit boundary costs an O(delta/h) error here: D u^g
+        // cannot follow a displacement that grows linearly off the
+        // boundary, so the cells along a boundary whose normal strain is
+        // not zero carry 0.24 delta/h relative stress error (derivation in
+        // docs/verification.md). Measured 1e-7 (stress) and 1e-8
+        // (displacement) at delta = 1e-6 h; C Table 1 reports 6e-9 to 1e-8.
+        assert!(es < 5e-7 && eu < 5e-8, "{angle}: {es:e} {eu:e}");
         // C 5.1: -13.46 and -5.77 MPa in the block frame, no shear, at
         // every point to 1e-3 relative (slivers at the corners of the
         // rotated block deviate most; the L2 error above is 2e-6).
@@ -63,9 +65,11 @@ fn block_roller_stresses_at_any_inclination() {
         }
         errs.push((es, eu));
     }
-    // 0 and 90 degrees: the same problem on the same grid, turned a quarter.
+    // 0 and 90 degrees: the same problem on the same grid, turned a
+    // quarter. Only the order of summation differs: measured 2e-9 of the
+    // error itself; a real asymmetry would change its leading digits.
     let ((a, b), (c, d)) = (errs[0], errs[3]);
-    assert!((a - c).abs() < 1e-9 * a && (b - d).abs() < 1e-9 * b, "{errs:?}");
+    assert!((a - c).abs() < 1e-6 * a && (b - d).abs() < 1e-6 * b, "{errs:?}");
 }
 
 #[test]
@@ -83,13 +87,18 @@ fn delta_trade_off() {
     for (d, e, k) in &rows {
         println!("delta/h {d:.0e}: displacement_l2 {e:.4e}, cond(K) {k:.3e}");
     }
-    // Falls about linearly over the first decades...
-    for w in rows[..4].windows(2) {
-        assert!(w[1].1 < 0.05 * w[0].1, "{rows:?}");
+    // Falls linearly while the band's modelling error dominates (each
+    // factor 100 in delta is a factor ~100 in the error)...
+    for w in rows[..3].windows(2) {
+        assert!(w[1].1 < 0.02 * w[0].1, "{rows:?}");
     }
-    // ... then stops falling (round-off amplified by cond ~ 1e16 and more).
+    // ... bottoms out at delta/h = 1e-6 to 1e-8 (C Fig. 13: ~1e-8 for
+    // delta/h <= 1e-6) ...
     let best = rows.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
-    assert!(rows[5].1 > 10.0 * best, "{rows:?}");
+    assert!(best == rows[2].1 || best == rows[3].1, "{rows:?}");
+    assert!(best < 2e-8, "{rows:?}");
+    // ... then rises again (round-off amplified by cond ~ 1e16 and more).
+    assert!(rows[4].1 > 10.0 * best && rows[5].1 > 10.0 * rows[4].1, "{rows:?}");
     // cond(K) ~ 1/delta: each factor 100 in delta is a factor ~100 in cond.
     for w in rows[..5].windows(2) {
         let ratio = w[1].2 / w[0].2;
@@ -198,11 +207,12 @@ fn square_traction_ibm_matches_b_table_1_displacements() {
         let r = run_all(&mut sim);
         let (eu, es) = (error(&r, "displacement_mean_relative"), error(&r, "syy_mean_relative"));
         println!("{angle} deg: displacement {eu:.3e} (B Table 1 at 45/60 deg: {rv:.2e}), s_yy {es:.3e}");
-        // Displacements at B's order (within a factor 3). Our s_yy errors
-        // are ~1e-7, an order above B's: the O(delta/h) band error (see the
-        // delta sweep) reaches the stresses here; bound them at 1e-6.
-        assert!(eu < 3.0 * rv, "{angle}: {eu}");
-        assert!(es < 1e-6, "{angle}: {es}");
+        // Displacements at or below B's order (measured 4e-8 to 1.2e-7).
+        // Our s_yy errors, 2.4e-8 to 1.2e-7, are up to an order above B's
+        // 7e-9 to 1e-8: the cells along the base carry the O(delta/h) band
+        // error (docs/verification.md); bound them at 2e-7.
+        assert!(eu < rv, "{angle}: {eu}");
+        assert!(es < 2e-7, "{angle}: {es}");
         // The pressure's resultant is the pressure times the side (B-spline
         // traction exact on a straight side).
         let b = &r.boundaries[0];
