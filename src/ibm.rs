@@ -333,14 +333,24 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
             rhs[(i, 1)] += scale * u[1];
         }
     }
-    let ev = mat
-        .self_adjoint_eigenvalues(faer::Side::Lower)
+    let evd = mat
+        .self_adjoint_eigen(faer::Side::Lower)
         .map_err(|e| format!("boundary least-squares fit: eigenvalues failed: {e:?}"))?;
-    let (lo, hi) = (ev[0], ev[m - 1]);
+    let (lo, hi) = (evd.S()[0], evd.S()[m - 1]);
     if !(lo > 1e-13 * hi) {
+        // The node that carries most of the weakest mode: the one whose
+        // basis function barely touches the boundary.
+        let weakest = evd.U().col(0);
+        let (&node, _) = index
+            .iter()
+            .max_by(|a, b| weakest[*a.1].abs().total_cmp(&weakest[*b.1].abs()))
+            .expect("m > 0");
+        let x = grid.node_position(node);
         return Err(format!(
             "the least-squares fit of the prescribed boundary values is singular or ill-conditioned \
-             (eigenvalues {lo:.3e} .. {hi:.3e}): some node of a cut cell barely touches the boundary; set fit_regularisation (e.g. 1e-10)"
+             (eigenvalues {lo:.3e} .. {hi:.3e}): node {node} at ({:.6}, {:.6}) barely touches the boundary; \
+             set fit_regularisation (e.g. 1e-10)",
+            x[0], x[1]
         ));
     }
     let llt = mat
@@ -373,6 +383,8 @@ pub struct IbmReport {
     /// Largest deviation of the step's displacement increment on the
     /// boundary from its prescribed increment (m).
     pub violation: f64,
+    /// Root mean square of that deviation along the boundary (m).
+    pub violation_rms: f64,
 }
 
 /// Per-step implicit-boundary data: bandwidth, the prescribed increments on

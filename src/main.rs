@@ -394,12 +394,13 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
     if let Some(r) = &last {
         for b in &r.ibm {
             out!(
-                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) N, violation {:.2e} m, {} cells cut",
+                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) N, violation {:.2e} m (rms {:.2e} m), {} cells cut",
                 b.name,
                 r.step,
                 b.reaction[0],
                 b.reaction[1],
                 b.violation,
+                b.violation_rms,
                 b.cut_cells
             );
         }

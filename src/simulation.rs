@@ -849,9 +849,18 @@ impl Simulation {
                 .fold([0.0; 2], |a, &n| [a[0] + residual[n][0], a[1] + residual[n][1]]);
             // Violation: the increment on the boundary (phi = 0) against the prescribed one.
             let mut violation = 0.0f64;
+            // Sampled at each piece's ends (for the largest) and its three
+            // Gauss points (for the root mean square along the boundary).
+            let (xg, wg) = crate::quadrature::gauss_legendre(3);
+            let samples: Vec<(f64, f64)> = [(0.0, 0.0), (1.0, 0.0)]
+                .into_iter()
+                .chain(xg.iter().zip(&wg).map(|(x, w)| (0.5 * (1.0 + x), 0.5 * w)))
+                .collect();
+            let (mut sum_sq, mut length) = (0.0, 0.0);
             for (a, e, _) in b.pieces(grid) {
                 let n = b.normal(a, e);
-                for t in [0.0, 0.5, 1.0] {
+                let len = (e[0] - a[0]).hypot(e[1] - a[1]);
+                for &(t, w) in &samples {
                     let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
                     let st = ibm::grid_stencil(grid, [x[0] + 1e-12 * grid.h * n[0], x[1] + 1e-12 * grid.h * n[1]]);
                     let (dm, _) = ibm::d_total(s.bs, x, s.delta);
@@ -870,6 +879,8 @@ impl Simulation {
                         crate::scene::DirichletKind::Roller => (u[0] * n[0] + u[1] * n[1] - b.value[0] * dl).abs(),
                     };
                     violation = violation.max(v);
+                    sum_sq += w * len * v * v;
+                    length += w * len;
                 }
             }
             reports.push(IbmReport {
@@ -877,6 +888,7 @@ impl Simulation {
                 cut_cells: cells.len(),
                 reaction,
                 violation,
+                violation_rms: if length > 0.0 { (sum_sq / length).sqrt() } else { 0.0 },
             });
         }
         (reports, work)

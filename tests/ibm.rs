@@ -111,10 +111,13 @@ proptest! {
 
     #[test]
     fn patch_test_at_random_inclination(angle in 0.0f64..360.0) {
-        // Confined compression of the block at any angle, delta = 1e-8 h
-        // (where the delta sweep bottoms out): a constant stress state to 1e-7.
+        // Confined compression of the block at any angle, delta = 1e-7 h,
+        // where the band's O(delta/h) error (~1e-8) meets the round-off of
+        // a system with cond ~1e13. Measured over nine angles: stress
+        // 1.0e-8 to 3.8e-8, displacement 8e-10 to 1.6e-9 (slivers at the
+        // rotated corners account for the spread).
         let mut sim = sim_with("block-roller-30", |s| {
-            s.analysis.delta_over_h = 1e-8;
+            s.analysis.delta_over_h = 1e-7;
             let rot = |p: [f64; 2]| {
                 let (sn, c) = angle.to_radians().sin_cos();
                 [80.0 + c * (p[0] - 80.0) - sn * (p[1] - 80.0), 80.0 + sn * (p[0] - 80.0) + c * (p[1] - 80.0)]
@@ -135,7 +138,7 @@ proptest! {
         });
         let r = run_all(&mut sim);
         let (es, eu) = (error(&r, "stress_l2"), error(&r, "displacement_l2"));
-        prop_assert!(es < 1e-7 && eu < 1e-7, "angle {}: {:e} {:e}", angle, es, eu);
+        prop_assert!(es < 1e-7 && eu < 1e-8, "angle {}: {:e} {:e}", angle, es, eu);
     }
 }
 
@@ -379,7 +382,12 @@ fn plate_hole_dirichlet_converges() {
         while !sim.finished() {
             let r = sim.step()?;
             if sim.finished() {
-                return Ok((r.ibm[0].violation, error(&r, "displacement_l2"), error(&r, "stress_l2")));
+                println!("h = {h}: largest boundary deviation {:.3e} m", r.ibm[0].violation);
+                return Ok((
+                    r.ibm[0].violation_rms,
+                    error(&r, "displacement_l2"),
+                    error(&r, "stress_l2"),
+                ));
             }
         }
         unreachable!()
@@ -388,7 +396,9 @@ fn plate_hole_dirichlet_converges() {
     match run(0.0625, 0.0) {
         Err(mpmlab::StepFailure::Singular { reason, .. }) => {
             assert!(
-                reason.contains("least-squares fit") && reason.contains("fit_regularisation"),
+                reason.contains("least-squares fit")
+                    && reason.contains("barely touches")
+                    && reason.contains("fit_regularisation"),
                 "{reason}"
             )
         }
@@ -397,7 +407,7 @@ fn plate_hole_dirichlet_converges() {
     let rows: Vec<(f64, f64, f64)> = hs.iter().map(|&h| run(h, 1e-10).unwrap()).collect();
     for (h, r) in hs.iter().zip(&rows) {
         println!(
-            "h = {h}: boundary fit error {:.3e} m, displacement_l2 {:.3e}, stress_l2 {:.3e}",
+            "h = {h}: boundary fit error (rms) {:.3e} m, displacement_l2 {:.3e}, stress_l2 {:.3e}",
             r.0, r.1, r.2
         );
     }
@@ -410,10 +420,13 @@ fn plate_hole_dirichlet_converges() {
     };
     let (rf, ru, rs) = (slope(&|r| r.0), slope(&|r| r.1), slope(&|r| r.2));
     println!("rates: boundary fit {rf:.2}, displacement {ru:.2}, stress {rs:.2}");
-    // Fit about 2 (measured 1.84 over this range; B reports 2.26 — the
-    // reason for the difference is not established); the domain like the
-    // Neumann case (displacement ~2, stress ~1; measured 1.62 and 0.94).
-    assert!(rf > 1.6, "fit rate {rf}");
+    // The fit, measured as the root mean square deviation along the
+    // boundary (the norm a least-squares fit minimises): about 2 or better
+    // (measured 2.07; B Fig. 20: 2.26). Its largest deviation converges
+    // more slowly (1.84), held back where the curve clips a cell's corner.
+    // The domain like the Neumann case (displacement ~2, stress ~1;
+    // measured 1.62 and 0.94).
+    assert!(rf > 1.9, "fit rate {rf}");
     assert!(ru > 1.5 && rs > 0.8, "domain rates {ru} {rs}");
 }
 
@@ -433,44 +446,70 @@ fn absolute_delta_equals_the_relative_one() {
 
 #[test]
 fn funnel_keeps_the_block_inside_its_curved_walls() {
-    // C 5.6: every step completes and no point leaves the funnel. (C also
-    // reports a straight front face; here it bulges by ~25 mm — the centre
-    // runs ahead of the points at the walls — which is not resolved; see
-    // docs/verification.md. A straight channel translates the block rigidly,
-    // so the rollers themselves let the material slide.)
+    // C 5.6: every step completes, no point leaves the funnel, and the
+    // right face, where the displacement is prescribed, stays vertical
+    // with a uniform displacement wherever it sits in its cell.
     let wall = |x: f64| {
-        if x <= 40.0 {
+        if x >= 0.0 {
             20.0
-        } else if x >= 100.0 {
+        } else if x <= -60.0 {
             14.0
         } else {
-            20.0 - 3.0 * (1.0 - (std::f64::consts::PI * (x - 40.0) / 60.0).cos())
+            20.0 - 3.0 * (1.0 - (std::f64::consts::PI * x / 60.0).cos())
         }
     };
     let mut sim = sim_with("funnel", |_| {});
     let mut worst = f64::NEG_INFINITY;
+    let mut face_spread = 0.0f64;
+    let mut face_lag = 0.0f64;
+    let mut violation = 0.0f64;
     while !sim.finished() {
-        sim.step().unwrap_or_else(|f| panic!("{f}"));
-        for x in &sim.points().x {
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        violation = violation.max(r.ibm.iter().find(|b| b.name == "pusher").unwrap().violation);
+        let pts = sim.points();
+        for x in &pts.x {
             // How far outside the (curved) wall, positive when outside.
             worst = worst.max(x[1].abs() - wall(x[0]));
         }
+        // The column of points next to the pusher (2x2 per 4 mm cell:
+        // x0 = 39 mm, 1 mm from it).
+        let ux: Vec<f64> = (0..pts.len())
+            .filter(|&p| pts.x0[p][0] > 38.5)
+            .map(|p| pts.displacement(p)[0])
+            .collect();
+        assert_eq!(ux.len(), 20);
+        let (lo, hi) = ux
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &u| (a.min(u), b.max(u)));
+        face_spread = face_spread.max(hi - lo);
+        face_lag = face_lag.max(
+            (lo - (-4.0 * r.step as f64))
+                .abs()
+                .max((hi - (-4.0 * r.step as f64)).abs()),
+        );
     }
     let pts = sim.points();
-    // The front column of points (2x2 per 4 mm cell: x0 = 39 mm).
-    let front: Vec<f64> = (0..pts.len())
-        .filter(|&p| pts.x0[p][0] > 38.5)
+    let lead: Vec<f64> = (0..pts.len())
+        .filter(|&p| pts.x0[p][0] < 1.5)
         .map(|p| pts.x[p][0])
         .collect();
-    assert_eq!(front.len(), 20);
-    let spread =
-        front.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - front.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-    println!("closest approach to the walls {worst:.3e} mm (negative: inside); front face spread {spread:.3e} mm");
+    println!(
+        "closest approach to the walls {worst:.3e} mm (negative: inside); pusher violation {violation:.3e} mm; points next \
+         to it: spread of u_x {face_spread:.3e} mm, largest difference from the pusher {face_lag:.3e} mm"
+    );
     // Points stay inside: the walls are exact polylines through the curve
     // at cell spacing, whose chords lie inside by at most h^2 |y''| / 8 ~ 0.01 mm.
     assert!(worst < 0.02, "{worst}");
-    // The block did go in: its front moved at least 5 mm everywhere.
-    assert!(front.iter().all(|&x| x > 44.0), "{front:?}");
+    // The face itself follows the pusher: the displacement on the
+    // boundary line is the prescribed one to round-off (measured below 1e-9 mm).
+    assert!(violation < 1e-6, "{violation}");
+    // The points 1 mm inside move with it, up to the strain over that
+    // 1 mm (measured: up to 0.68 mm behind, 0.34 mm spread along the face
+    // while the block squeezes into the funnel): vertical at the scale of
+    // C Fig. 23, where 0.5 mm is 1/80 of the block.
+    assert!(face_spread < 0.5 && face_lag < 1.0, "{face_spread} {face_lag}");
+    // The block did go in: its leading face moved at least 5 mm everywhere.
+    assert!(lead.iter().all(|&x| x < -4.0), "{lead:?}");
 }
 
 #[test]
@@ -478,8 +517,8 @@ fn straight_channel_rollers_let_the_block_slide() {
     // The funnel with straight walls: the pusher translates the block
     // rigidly between frictionless rollers, storing no energy.
     let mut sim = sim_with("funnel", |s| {
-        s.ibm[1].points = vec![[-8.0, 20.0], [168.0, 20.0]];
-        s.ibm[2].points = vec![[-8.0, -20.0], [168.0, -20.0]];
+        s.ibm[1].points = vec![[-128.0, 20.0], [48.0, 20.0]];
+        s.ibm[2].points = vec![[-128.0, -20.0], [48.0, -20.0]];
     });
     let r = run_all(&mut sim);
     // Stored energy of a rigid motion is zero; 1e-6 J per unit thickness
@@ -489,7 +528,7 @@ fn straight_channel_rollers_let_the_block_slide() {
     for (p, x) in sim.points().x.iter().enumerate() {
         let u = sim.points().displacement(p);
         assert!(
-            (u[0] - 40.0).abs() < 1e-5 && u[1].abs() < 1e-5,
+            (u[0] + 40.0).abs() < 1e-5 && u[1].abs() < 1e-5,
             "point {p} at {x:?}: {u:?}"
         );
     }

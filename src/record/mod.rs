@@ -12,7 +12,7 @@
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of every field (`sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | every step |
 //! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
 //! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | every step |
-//! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,cut_cells}` | Scalars | every step |
+//! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,violation_rms,cut_cells}` | Scalars | every step |
 //! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | every step |
 //! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
 //! | `metrics/newton/iterations`, `metrics/ghost/faces`, `metrics/energy/plastic_dissipation` | Scalars | every step |
@@ -319,6 +319,7 @@ impl Recorder {
             self.scalar(&format!("{base}/reaction_x"), b.reaction[0])?;
             self.scalar(&format!("{base}/reaction_y"), b.reaction[1])?;
             self.scalar(&format!("{base}/violation"), b.violation)?;
+            self.scalar(&format!("{base}/violation_rms"), b.violation_rms)?;
             self.scalar(&format!("{base}/cut_cells"), b.cut_cells as f64)?;
         }
         for b in &report.boundaries {
