@@ -822,14 +822,15 @@ impl Simulation {
                 }
             }
         }
-        // Work of the reactions: trapezoidal on the nodal increments.
+        // Work of the reactions: trapezoidal on the nodal increments of the
+        // free dofs (grid-prescribed dofs count their reactions' work
+        // with the other grid constraints).
         let mut work = 0.0;
         for n in 0..grid.num_nodes() {
-            if map.dofs.node_dof[n][0] == Dof::Inactive {
-                continue;
-            }
             for c in 0..2 {
-                work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + s.da[n][c]);
+                if let Dof::Free(_) = map.dofs.node_dof[n][c] {
+                    work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + s.da[n][c]);
+                }
             }
         }
         let mut reports = Vec::new();

@@ -431,6 +431,39 @@ fn plate_hole_dirichlet_converges() {
 }
 
 #[test]
+fn energy_balance_with_implicit_and_grid_constraints() {
+    // The 0 deg block with its base on an implicit roller and the other
+    // sides on grid rollers, the top moving 1 mm down: the grid
+    // constraints' reactions and the implicit one's both work, each once.
+    let mut sim = sim_with("block-roller-0", |s| {
+        s.ibm.truncate(1);
+        let grid_roller = |x: Option<f64>, y: Option<f64>, u: f64| {
+            let text = match (x, y) {
+                (Some(x), _) => format!("kind = \"roller\"\nx = {x}\nnormal_displacement = {u}"),
+                (_, Some(y)) => format!("kind = \"roller\"\ny = {y}\nnormal_displacement = {u}"),
+                _ => unreachable!(),
+            };
+            toml::from_str(&text).unwrap()
+        };
+        s.dirichlet = vec![
+            grid_roller(Some(30.0), None, 0.0),
+            grid_roller(Some(130.0), None, 0.0),
+            grid_roller(None, Some(130.0), -1.0),
+        ];
+    });
+    let r = run_all(&mut sim);
+    // The uniaxial-strain state: U = M e^2 V / 2 = 673.08 N mm / mm.
+    let u = 0.5 * 1346.153846 * 0.01f64.powi(2) * 100.0 * 100.0;
+    println!(
+        "strain energy {:.6e}, work {:.6e}, exact {u:.6e}",
+        r.energy.strain, r.energy.external_work
+    );
+    // W = U to round-off; U itself within the band's O(delta/h) of the exact one.
+    assert!((r.energy.strain - r.energy.external_work).abs() < 1e-8 * r.energy.strain);
+    assert!((r.energy.strain - u).abs() < 1e-5 * u);
+}
+
+#[test]
 fn absolute_delta_equals_the_relative_one() {
     let (_, a) = block(30, 1e-6);
     let mut sim = sim_with("block-roller-30", |s| {
