@@ -118,3 +118,30 @@ fn progress_streams_residuals_and_can_cancel_a_step() {
     let r = sim.step().unwrap();
     assert_eq!(r.residuals[..2], [p[0].residual, p[1].residual]);
 }
+
+#[test]
+fn a_panic_inside_a_step_is_a_failure_value_and_the_state_survives() {
+    use mpmlab::simulation::Progress;
+    // An observer that panics stands in for a bug anywhere inside the step:
+    // step_guarded turns it into StepFailure::Internal, and since a step
+    // commits only at its end the state stays at step 0.
+    let mut sim = sim_with("elastic-beam-ghost", |_| {});
+    let before = sim.points().x.clone();
+    sim.set_progress(Some(Box::new(|p: &Progress| {
+        if p.iteration == 1 {
+            panic!("deliberate panic at iteration 1");
+        }
+        true
+    })));
+    match sim.step_guarded() {
+        Err(StepFailure::Internal { step: 1, message }) => {
+            assert!(message.contains("deliberate panic"), "{message}")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(sim.step_index(), 0);
+    assert_eq!(sim.points().x, before);
+    // The simulation carries on: the same step completes without the hook.
+    sim.set_progress(None);
+    assert_eq!(sim.step_guarded().unwrap().step, 1);
+}
