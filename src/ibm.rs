@@ -15,7 +15,8 @@
 //! C (18)-(27), and the difference between `K1` with `D` and the points'
 //! `K1`, which integrates the band with `D = I`. Prescribed
 //! values go on the nodes of the cells the boundary cuts (B footnote 3) and
-//! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`.
+//! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`
+//! (over the points, and `(B_bar - B)^T` over the band for the same reason).
 
 use crate::basis::{stencil, BasisKind, Stencil};
 use crate::exact::ExactSolution;
