@@ -466,7 +466,7 @@ impl Simulation {
         let mut timings = Timings::default();
 
         // 1-2. Map points to the grid and assemble.
-        let map = Mapping::build(
+        let mut map = Mapping::build(
             &self.model.grid,
             &self.state.points,
             &self.model.bodies,
@@ -494,6 +494,14 @@ impl Simulation {
                 .map_err(|reason| StepFailure::Singular { step, reason })?,
             )
         };
+        // A grid constraint prescribes a node's whole motion: where an
+        // implicit boundary also puts a value d^a on that dof, the grid
+        // unknown carries only the rest.
+        if let Some(s) = &ibm_step {
+            for (n, c, u) in map.dofs.constrained.iter_mut() {
+                *u -= s.da[*n][*c];
+            }
+        }
         let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
         let mut band: BTreeMap<(u32, u32, u8, u8), BandBlock> = BTreeMap::new();
         if let Some(s) = &ibm_step {
@@ -728,8 +736,9 @@ impl Simulation {
         for i in 0..map.dofs.n_free {
             work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * du[i];
         }
-        for (c, &(_, _, u)) in map.dofs.constrained.iter().enumerate() {
-            work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * u;
+        for (c, &(n, comp, u)) in map.dofs.constrained.iter().enumerate() {
+            let total = u + ibm_step.as_ref().map_or(0.0, |s| s.da[n][comp]);
+            work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * total;
         }
         if let Some(s) = &ibm_step {
             // Body forces also work on the prescribed field's motion N d^a.

@@ -50,12 +50,14 @@ fn block_roller_stresses_at_any_inclination() {
         // cannot follow a displacement that grows linearly off the
         // boundary, so the cells along a boundary whose normal strain is
         // not zero carry 0.24 delta/h relative stress error (derivation in
-        // docs/verification.md). Measured 1e-7 (stress) and 1e-8
-        // (displacement) at delta = 1e-6 h; C Table 1 reports 6e-9 to 1e-8.
-        assert!(es < 5e-7 && eu < 5e-8, "{angle}: {es:e} {eu:e}");
+        // docs/verification.md); cut cells carry more (0.74 delta/h at
+        // 45 deg). Measured at delta = 1e-6 h: stress 9.8e-8 to 3.8e-7,
+        // displacement 8e-9 to 1.1e-8; the stress bound is delta/h itself.
+        // C Table 1 reports 6e-9 to 1.3e-8.
+        assert!(es < 1e-6 && eu < 5e-8, "{angle}: {es:e} {eu:e}");
         // C 5.1: -13.46 and -5.77 MPa in the block frame, no shear, at
         // every point to 1e-3 relative (slivers at the corners of the
-        // rotated block deviate most; the L2 error above is 2e-6).
+        // rotated block deviate most; the L2 error above is ~1e-7).
         for s in block_frame_stress(&sim, angle as f64) {
             let tol = 1e-3 * 13.4615;
             assert!(
@@ -204,7 +206,7 @@ fn square_traction_ibm_matches_b_table_1_displacements() {
     // B 4.1.2 / Table 1: rollers by IBM on three sides, pressure through a
     // B-spline on the fourth. B: 45 deg Rv 4.84e-7, Rsyy 9.68e-9; 60 deg Rv
     // 4.90e-7, Rsyy 7.25e-9 (volume-weighted mean relative errors, B (37)-(40)).
-    // B lists no number for 0 deg: the same bound as the others (1.5e-6).
+    // B lists no number for 0 deg: the same bound as the others (5e-7).
     for (angle, rv) in [(0u32, 5e-7), (45, 4.84e-7), (60, 4.90e-7)] {
         let mut sim = sim_with(&format!("square-traction-ibm-{angle}"), |_| {});
         let r = run_all(&mut sim);
@@ -464,6 +466,30 @@ fn energy_balance_with_implicit_and_grid_constraints() {
 }
 
 #[test]
+fn a_grid_constraint_and_an_implicit_one_on_the_same_line_agree() {
+    // The 0 deg block's top is on a grid line: prescribe its 1 mm there
+    // twice, by the implicit boundary and by a grid roller. The grid
+    // constraint fixes the node's whole motion, so its unknown carries the
+    // rest after the implicit value d^a: the block still compresses by
+    // 1 mm (not 2), the boundary holds, and W = U.
+    let mut sim = sim_with("block-roller-0", |s| {
+        s.dirichlet = vec![toml::from_str("kind = \"roller\"\ny = 130.0\nnormal_displacement = -1.0").unwrap()];
+    });
+    let r = run_all(&mut sim);
+    let (es, eu) = (error(&r, "stress_l2"), error(&r, "displacement_l2"));
+    let top = r.ibm.iter().find(|b| b.name == "top").unwrap();
+    println!(
+        "stress_l2 {es:.3e}, displacement_l2 {eu:.3e}, top violation {:.1e}",
+        top.violation
+    );
+    // Errors of the implicit boundaries' order (measured 7.9e-8 and 9.4e-9;
+    // 9.8e-8 and 8.1e-9 without the grid roller; 2.7 before the fix).
+    assert!(es < 5e-7 && eu < 5e-8, "{es:e} {eu:e}");
+    assert!(top.violation < 1e-9, "{}", top.violation);
+    assert!((r.energy.strain - r.energy.external_work).abs() < 1e-8 * r.energy.strain);
+}
+
+#[test]
 fn absolute_delta_equals_the_relative_one() {
     let (_, a) = block(30, 1e-6);
     let mut sim = sim_with("block-roller-30", |s| {
@@ -472,16 +498,28 @@ fn absolute_delta_equals_the_relative_one() {
     });
     let b = run_all(&mut sim);
     // delta = 1e-5 / 10 differs from 1e-6 in the last bit at most, but with
-    // cond(K) = 2.9e12 the fifth digit of a 2e-6 error is round-off: 1e-3.
+    // cond(K) = 2.9e12 the low digits of a 1.4e-7 error are round-off: 1e-3.
     let (x, y) = (error(&a, "stress_l2"), error(&b, "stress_l2"));
+    println!("relative delta {x:.6e}, absolute delta {y:.6e}");
     assert!((x - y).abs() < 1e-3 * x, "{x} {y}");
 }
 
-#[test]
-fn funnel_keeps_the_block_inside_its_curved_walls() {
-    // C 5.6: every step completes, no point leaves the funnel, and the
-    // right face, where the displacement is prescribed, stays vertical
-    // with a uniform displacement wherever it sits in its cell.
+/// What the funnel run shows: the closest approach of a point to the walls
+/// (positive: outside), the pusher's largest and rms violation, the spread
+/// of u_x over the points next to the pusher and their largest difference
+/// from it (mm), and whether the leading face moved 5 mm everywhere.
+struct Funnel {
+    worst: f64,
+    violation: f64,
+    violation_rms: f64,
+    face_spread: f64,
+    face_lag: f64,
+    went_in: bool,
+}
+
+/// The funnel with its grid shifted left by `shift` (mm; the block and the
+/// walls stay put).
+fn funnel(shift: f64) -> Funnel {
     let wall = |x: f64| {
         if x >= 0.0 {
             20.0
@@ -491,58 +529,84 @@ fn funnel_keeps_the_block_inside_its_curved_walls() {
             20.0 - 3.0 * (1.0 - (std::f64::consts::PI * x / 60.0).cos())
         }
     };
-    let mut sim = sim_with("funnel", |_| {});
-    let mut worst = f64::NEG_INFINITY;
-    let mut face_spread = 0.0f64;
-    let mut face_lag = 0.0f64;
-    let mut violation = 0.0f64;
+    let mut sim = sim_with("funnel", |s| {
+        s.grid.origin[0] -= shift;
+        s.grid.size[0] += 4.0 * (shift / 4.0).ceil();
+    });
+    let mut f = Funnel {
+        worst: f64::NEG_INFINITY,
+        violation: 0.0,
+        violation_rms: 0.0,
+        face_spread: 0.0,
+        face_lag: 0.0,
+        went_in: false,
+    };
     while !sim.finished() {
-        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
-        violation = violation.max(r.ibm.iter().find(|b| b.name == "pusher").unwrap().violation);
+        let r = sim.step().unwrap_or_else(|e| panic!("{e}"));
+        let pusher = r.ibm.iter().find(|b| b.name == "pusher").unwrap();
+        f.violation = f.violation.max(pusher.violation);
+        f.violation_rms = f.violation_rms.max(pusher.violation_rms);
         let pts = sim.points();
         for x in &pts.x {
-            // How far outside the (curved) wall, positive when outside.
-            worst = worst.max(x[1].abs() - wall(x[0]));
+            f.worst = f.worst.max(x[1].abs() - wall(x[0]));
         }
-        // The column of points next to the pusher (2x2 per 4 mm cell:
-        // x0 = 39 mm, 1 mm from it).
+        // The column of points next to the pusher (within 1.5 mm of it).
         let ux: Vec<f64> = (0..pts.len())
             .filter(|&p| pts.x0[p][0] > 38.5)
             .map(|p| pts.displacement(p)[0])
             .collect();
-        assert_eq!(ux.len(), 20);
+        assert!(ux.len() >= 20, "{}", ux.len());
+        let pushed = -4.0 * r.step as f64;
         let (lo, hi) = ux
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &u| (a.min(u), b.max(u)));
-        face_spread = face_spread.max(hi - lo);
-        face_lag = face_lag.max(
-            (lo - (-4.0 * r.step as f64))
-                .abs()
-                .max((hi - (-4.0 * r.step as f64)).abs()),
-        );
+        f.face_spread = f.face_spread.max(hi - lo);
+        f.face_lag = f.face_lag.max((lo - pushed).abs().max((hi - pushed).abs()));
     }
     let pts = sim.points();
-    let lead: Vec<f64> = (0..pts.len())
+    f.went_in = (0..pts.len())
         .filter(|&p| pts.x0[p][0] < 1.5)
-        .map(|p| pts.x[p][0])
-        .collect();
+        .all(|p| pts.x[p][0] < -4.0);
     println!(
-        "closest approach to the walls {worst:.3e} mm (negative: inside); pusher violation {violation:.3e} mm; points next \
-         to it: spread of u_x {face_spread:.3e} mm, largest difference from the pusher {face_lag:.3e} mm"
+        "grid shifted {shift} mm: closest approach to the walls {:.3e} mm (negative: inside); pusher violation {:.3e} mm \
+         (rms {:.3e}); points next to it: spread of u_x {:.3e} mm, largest difference from the pusher {:.3e} mm",
+        f.worst, f.violation, f.violation_rms, f.face_spread, f.face_lag
     );
-    // Points stay inside: the walls are exact polylines through the curve
-    // at cell spacing, whose chords lie inside by at most h^2 |y''| / 8 ~ 0.01 mm.
-    assert!(worst < 0.02, "{worst}");
-    // The face itself follows the pusher: the displacement on the
-    // boundary line is the prescribed one to round-off (measured below 1e-9 mm).
-    assert!(violation < 1e-6, "{violation}");
-    // The points 1 mm inside move with it, up to the strain over that
-    // 1 mm (measured: up to 0.68 mm behind, 0.34 mm spread along the face
-    // while the block squeezes into the funnel): vertical at the scale of
-    // C Fig. 23, where 0.5 mm is 1/80 of the block.
-    assert!(face_spread < 0.5 && face_lag < 1.0, "{face_spread} {face_lag}");
-    // The block did go in: its leading face moved at least 5 mm everywhere.
-    assert!(lead.iter().all(|&x| x < -4.0), "{lead:?}");
+    f
+}
+
+#[test]
+fn funnel_keeps_the_block_inside_its_curved_walls() {
+    // C 5.6: every step completes, no point leaves the funnel, and the
+    // right face, where the displacement is prescribed, stays vertical
+    // with a uniform displacement, on grid lines (the scene) and 1.3 mm
+    // inside a cell (the grid shifted).
+    for shift in [0.0, 1.3] {
+        let f = funnel(shift);
+        // Points stay inside: the walls are exact polylines through the
+        // curve at cell spacing, whose chords lie inside by at most
+        // h^2 |y''| / 8 ~ 0.01 mm.
+        assert!(f.worst < 0.02, "{shift}: {}", f.worst);
+        // The face follows the pusher: on grid lines the displacement on
+        // the boundary line is the prescribed one to round-off (measured
+        // 5e-14 mm); inside a cell, once the pusher reaches the curve its
+        // corner cells' nodes also carry the inclined walls' normal
+        // values, which its corners cannot meet together with u_y = 0
+        // (measured 7.3e-4 mm, 1.8e-4 of the 4 mm step; 5e-4 allowed).
+        let allowed = if shift == 0.0 { 1e-9 } else { 2e-3 };
+        assert!(f.violation < allowed, "{shift}: {}", f.violation);
+        // The points next to the pusher move with it, up to the strain
+        // over that distance: vertical at the scale of C Fig. 23, where
+        // 0.5 mm is 1/80 of the block.
+        assert!(
+            f.face_spread < 0.5 && f.face_lag < 1.0,
+            "{shift}: {} {}",
+            f.face_spread,
+            f.face_lag
+        );
+        // The block did go in: its leading face moved at least 5 mm everywhere.
+        assert!(f.went_in, "{shift}");
+    }
 }
 
 #[test]
