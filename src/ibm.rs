@@ -49,6 +49,19 @@ pub struct IbmBoundary {
 }
 
 impl IbmBoundary {
+    /// How far the boundary moves per unit load factor when it `moves`:
+    /// a fixed boundary by its displacement, a (straight) roller by its
+    /// normal displacement along its inward normal.
+    pub fn motion(&self) -> P2 {
+        match self.kind {
+            DirichletKind::Fixed => self.value,
+            DirichletKind::Roller => {
+                let n = self.normal(self.points[0], self.points[1]);
+                [self.value[0] * n[0], self.value[0] * n[1]]
+            }
+        }
+    }
+
     /// The boundary translated by `d`.
     pub fn translated(&self, d: P2) -> IbmBoundary {
         IbmBoundary {
@@ -378,8 +391,8 @@ pub struct IbmReport {
     /// Cells the boundary cuts.
     pub cut_cells: usize,
     /// Force the boundary exerts on the material at the end of the step
-    /// (N per unit thickness): `f_int - f_ext` summed over the nodes of its
-    /// cut cells (tractions on those nodes are not subtracted).
+    /// (N per unit thickness): `f_int - f_ext` (every load, tractions
+    /// included) summed over the free dofs of its cut cells' nodes.
     pub reaction: P2,
     /// Largest deviation of the step's displacement increment on the
     /// boundary from its prescribed increment (m).

@@ -563,11 +563,26 @@ impl Model {
                 moves: spec.moves,
                 spline,
             };
-            if spec.moves && (spec.kind != DirichletKind::Fixed || spec.exact_field) {
-                return Err(FieldError::new(
-                    f("moves"),
-                    "only fixed boundaries with a uniform displacement can move",
-                ));
+            if spec.moves {
+                // A moving roller translates along its one normal.
+                let straight = poly.windows(3).all(|w| {
+                    let (a, b) = (
+                        [w[1][0] - w[0][0], w[1][1] - w[0][1]],
+                        [w[2][0] - w[1][0], w[2][1] - w[1][1]],
+                    );
+                    (a[0] * b[1] - a[1] * b[0]).abs() <= 1e-9 * a[0].hypot(a[1]) * b[0].hypot(b[1])
+                        && a[0] * b[0] + a[1] * b[1] > 0.0
+                });
+                let ok = match spec.kind {
+                    DirichletKind::Fixed => !spec.exact_field,
+                    DirichletKind::Roller => straight && spec.boundary.is_none(),
+                };
+                if !ok {
+                    return Err(FieldError::new(
+                        f("moves"),
+                        "only fixed boundaries with a uniform displacement, or straight rollers, can move",
+                    ));
+                }
             }
             b.side = match spec.material_side {
                 Some(MaterialSide::Left) => 1.0,

@@ -259,6 +259,10 @@ pub(crate) struct State {
     pub(crate) ghost_faces: Vec<(P2, P2)>,
     /// Newton iterations over all steps so far.
     pub(crate) iterations: usize,
+    /// Linear path: the work the stresses have done so far,
+    /// `sum_steps sum_p V_p (s0 + s1)/2 : de` with each step's starting
+    /// volumes (the stored energy of the updated small-strain model).
+    pub(crate) strain_energy: f64,
     /// How far each moving implicit boundary has moved.
     pub(crate) ibm_offsets: Vec<P2>,
     /// Explicit dynamics: kinetic plus strain energy at the start (J).
@@ -297,6 +301,7 @@ impl Simulation {
             points: model.points.clone(),
             step: 0,
             external_work: 0.0,
+            strain_energy: 0.0,
             active_cells: map.active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,
@@ -726,7 +731,7 @@ impl Simulation {
                 }
                 points.x[p] = [points.x[p][0] + dx[0], points.x[p][1] + dx[1]];
             }
-            let (reports, work) = self.ibm_reports(&map, s, &points, &nodal_d, lambda0, lambda1);
+            let (reports, work) = self.ibm_reports(&map, s, &points, &nodal_d, &forces.ext, lambda0, lambda1);
             ibm_reports = reports;
             ibm_work = work;
         }
@@ -751,20 +756,29 @@ impl Simulation {
             }
             work += ibm_work;
         }
-        let strain_energy: f64 = (0..points.len())
-            .map(|p| {
-                let (s, e) = (points.stress[p], points.strain[p]);
-                0.5 * (s[0] * e[0] + s[1] * e[1] + s[2] * e[2]) * self.state.points.vol[p]
-            })
-            .sum();
+        // The stresses' work over the step, on the volumes it started with:
+        // what the trapezoidal work of loads and reactions pays for. (For
+        // one step it is 1/2 s:e V; over several, 1/2 s:e on the updated
+        // volumes would differ from it by the volume change.)
+        let old = &self.state.points;
+        let strain_energy = self.state.strain_energy
+            + (0..points.len())
+                .map(|p| {
+                    let (s0, s1) = (old.stress[p], points.stress[p]);
+                    let de = [0, 1, 2].map(|k| points.strain[p][k] - old.strain[p][k]);
+                    0.5 * (0..3).map(|k| (s0[k] + s1[k]) * de[k]).sum::<f64>() * old.vol[p]
+                })
+                .sum::<f64>();
         timings.update = t.elapsed().as_secs_f64();
 
         // Commit.
         self.commit(points, step, work, &map, &faces, 1);
+        self.state.strain_energy = strain_energy;
         for (off, b) in self.state.ibm_offsets.iter_mut().zip(&self.model.ibm) {
             if b.moves {
-                off[0] += b.value[0] * (lambda1 - lambda0);
-                off[1] += b.value[1] * (lambda1 - lambda0);
+                let m = b.motion();
+                off[0] += m[0] * (lambda1 - lambda0);
+                off[1] += m[1] * (lambda1 - lambda0);
             }
         }
         let errors = match &self.model.exact {
@@ -804,38 +818,62 @@ impl Simulation {
     /// the out-of-balance of the new stresses on the nodes of each
     /// boundary's cut cells; violation sampled along the boundary), and the
     /// work their reactions did in the step (trapezoidal).
+    #[allow(clippy::too_many_arguments)]
     fn ibm_reports(
         &self,
         map: &Mapping,
         s: &IbmStep,
         new: &Points,
         nodal_d: &[P2],
+        ext: &[f64],
         lambda0: f64,
         lambda1: f64,
     ) -> (Vec<IbmReport>, f64) {
         let grid = &self.model.grid;
         let old = &self.state.points;
-        // Out-of-balance of the material at the start and end of the step:
-        // where the implicit boundaries act, it is their reaction.
+        // Out-of-balance of the material (internal minus every external
+        // force on the free dofs) at the start and end of the step: where
+        // the implicit boundaries act, it is their reaction.
         let mut residual = vec![[0.0; 2]; grid.num_nodes()];
         let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
-        let g = self.model.gravity;
         for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
             let st = &map.stencils[p];
             let (bb, _) = s.point_b(st, old.x[p]);
-            for (k, (n, w, _)) in st.iter().enumerate() {
+            for (k, (n, _, _)) in st.iter().enumerate() {
                 for c in 0..2 {
                     let f = |sig: [f64; 3]| (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
-                    residual[n][c] += f(new.stress[p]) - lambda1 * w * old.mass[p] * g[c];
-                    residual0[n][c] += f(old.stress[p]) - lambda0 * w * old.mass[p] * g[c];
+                    residual[n][c] += f(new.stress[p]);
+                    residual0[n][c] += f(old.stress[p]);
                 }
             }
         }
-        // Work of the reactions: trapezoidal on the nodal increments of the
-        // free dofs (grid-prescribed dofs count their reactions' work
-        // with the other grid constraints).
+        for (n, d) in map.dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = d[c] {
+                    residual[n][c] -= lambda1 * ext[i];
+                    residual0[n][c] -= lambda0 * ext[i];
+                }
+            }
+        }
+        let nodes_of = |b: &crate::ibm::IbmBoundary| {
+            let mut nodes: Vec<usize> = b
+                .cut_cells(grid)
+                .iter()
+                .flat_map(|&c| grid.cell_nodes(c % grid.nx, c / grid.nx))
+                .collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            nodes
+        };
+        // Work of the reactions: trapezoidal on the increments of the free
+        // dofs of the cut cells' nodes (grid-prescribed dofs count their
+        // reactions' work with the other grid constraints; elsewhere the
+        // out-of-balance is the remap's, not a support's).
+        let mut support: Vec<usize> = s.bs.iter().flat_map(nodes_of).collect();
+        support.sort_unstable();
+        support.dedup();
         let mut work = 0.0;
-        for n in 0..grid.num_nodes() {
+        for &n in &support {
             for c in 0..2 {
                 if let Dof::Free(_) = map.dofs.node_dof[n][c] {
                     work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + s.da[n][c]);
@@ -846,12 +884,7 @@ impl Simulation {
         let dl = lambda1 - lambda0;
         for b in s.bs.iter() {
             let cells = b.cut_cells(grid);
-            let mut nodes: Vec<usize> = cells
-                .iter()
-                .flat_map(|&c| grid.cell_nodes(c % grid.nx, c / grid.nx))
-                .collect();
-            nodes.sort_unstable();
-            nodes.dedup();
+            let nodes = nodes_of(b);
             // The support force on the body balances the out-of-balance
             // force of the material there: R = f_int - f_ext.
             let reaction = nodes

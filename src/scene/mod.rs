@@ -193,8 +193,9 @@ pub struct IbmSpec {
     /// report when nodes barely touch the boundary).
     #[serde(default)]
     pub fit_regularisation: f64,
-    /// For `fixed` with a uniform `displacement`: the boundary itself moves
-    /// with the prescribed displacement (a rigid footing pushed in).
+    /// For `fixed` with a uniform `displacement`, or a straight `roller`
+    /// with a `normal_displacement`: the boundary itself moves with the
+    /// prescribed displacement (a rigid footing pushed in, a platen).
     #[serde(default)]
     pub moves: bool,
     /// For `roller`: the prescribed displacement along the inward normal (m).
