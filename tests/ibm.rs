@@ -490,6 +490,38 @@ fn a_grid_constraint_and_an_implicit_one_on_the_same_line_agree() {
 }
 
 #[test]
+fn a_straight_roller_with_a_normal_displacement_can_move() {
+    // The 30 deg block's top as a platen that follows its 1 mm over four
+    // steps: it ends 1 mm further along its inward normal, and no point
+    // gets past it.
+    let mut sim = sim_with("block-roller-30", |s| {
+        s.analysis.load_steps = 4;
+        s.ibm[3].moves = true;
+    });
+    let before = sim.ibm_boundaries()[3].clone();
+    run_all(&mut sim);
+    let after = &sim.ibm_boundaries()[3];
+    let n = before.normal(before.points[0], before.points[1]);
+    for (a, b) in before.points.iter().zip(&after.points) {
+        assert!(
+            (b[0] - a[0] - n[0]).abs() < 1e-12 && (b[1] - a[1] - n[1]).abs() < 1e-12,
+            "{a:?} -> {b:?}"
+        );
+    }
+    for x in &sim.points().x {
+        let (phi, _) = after.distance(*x).unwrap();
+        assert!(phi > 0.0, "{x:?} is past the platen by {phi}");
+    }
+    // A polyline roller cannot: its normal is not one direction.
+    let text = std::fs::read_to_string(common::scene_path("funnel")).unwrap();
+    let mut scene = mpmlab::scene::Scene::parse(&text, "funnel").unwrap();
+    scene.ibm[1].moves = true;
+    scene.ibm[1].normal_displacement = Some(1.0);
+    let err = mpmlab::Model::build(&scene, &text, "funnel").unwrap_err().to_string();
+    assert!(err.contains("moves") && err.contains("straight rollers"), "{err}");
+}
+
+#[test]
 fn absolute_delta_equals_the_relative_one() {
     let (_, a) = block(30, 1e-6);
     let mut sim = sim_with("block-roller-30", |s| {
