@@ -855,41 +855,45 @@ impl Simulation {
                 }
             }
         }
-        let nodes_of = |b: &crate::ibm::IbmBoundary| {
-            let mut nodes: Vec<usize> = b
-                .cut_cells(grid)
-                .iter()
-                .flat_map(|&c| grid.cell_nodes(c % grid.nx, c / grid.nx))
+        // Per boundary: its cut cells and their nodes.
+        let cut: Vec<(Vec<usize>, Vec<usize>)> =
+            s.bs.iter()
+                .map(|b| {
+                    let cells = b.cut_cells(grid);
+                    let mut nodes: Vec<usize> = cells
+                        .iter()
+                        .flat_map(|&c| grid.cell_nodes(c % grid.nx, c / grid.nx))
+                        .collect();
+                    nodes.sort_unstable();
+                    nodes.dedup();
+                    (cells, nodes)
+                })
                 .collect();
-            nodes.sort_unstable();
-            nodes.dedup();
-            nodes
-        };
+        let free = |n: usize, c: usize| matches!(map.dofs.node_dof[n][c], Dof::Free(_));
         // Work of the reactions: trapezoidal on the increments of the free
         // dofs of the cut cells' nodes (grid-prescribed dofs count their
         // reactions' work with the other grid constraints; elsewhere the
         // out-of-balance is the remap's, not a support's).
-        let mut support: Vec<usize> = s.bs.iter().flat_map(nodes_of).collect();
+        let mut support: Vec<usize> = cut.iter().flat_map(|(_, nodes)| nodes.iter().copied()).collect();
         support.sort_unstable();
         support.dedup();
         let mut work = 0.0;
         for &n in &support {
-            for c in 0..2 {
-                if let Dof::Free(_) = map.dofs.node_dof[n][c] {
-                    work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + s.da[n][c]);
-                }
+            for c in (0..2).filter(|&c| free(n, c)) {
+                work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + s.da[n][c]);
             }
         }
         let mut reports = Vec::new();
         let dl = lambda1 - lambda0;
-        for b in s.bs.iter() {
-            let cells = b.cut_cells(grid);
-            let nodes = nodes_of(b);
+        for (b, (cells, nodes)) in s.bs.iter().zip(&cut) {
             // The support force on the body balances the out-of-balance
             // force of the material there: R = f_int - f_ext.
-            let reaction = nodes
-                .iter()
-                .fold([0.0; 2], |a, &n| [a[0] + residual[n][0], a[1] + residual[n][1]]);
+            let mut reaction = [0.0; 2];
+            for &n in nodes {
+                for c in (0..2).filter(|&c| free(n, c)) {
+                    reaction[c] += residual[n][c];
+                }
+            }
             // Violation: the increment on the boundary (phi = 0) against the prescribed one.
             let mut violation = 0.0f64;
             // Sampled at each piece's ends (for the largest) and its three
