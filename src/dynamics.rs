@@ -25,71 +25,21 @@
 //!    [`StepFailure::NonFinite`]: the state stays at the last good step.
 
 use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::bulk::blocks_of;
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
+use crate::kinematics::{be_matrix, commit_point, increment_gradient};
 use crate::linalg::{self, Condition, ConditionMethod, Factor};
 use crate::material::hencky::Response;
-use crate::newton::{be_matrix, blocks_of, increment_gradient};
+use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
-use crate::simulation::{Energy, Simulation, StepFailure, StepReport, Timings};
+use crate::state::Simulation;
 use faer::sparse::linalg::solvers::SymbolicLlt;
 use faer::sparse::SparseColMat;
 use nalgebra::Matrix2;
 use std::time::Instant;
 
-/// What an explicit step adds to its [`StepReport`].
-#[derive(Clone, Debug, PartialEq)]
-pub struct DynamicsReport {
-    /// Time at the end of the step (s).
-    pub time: f64,
-    /// Time step (s).
-    pub dt: f64,
-    /// `W_0`: kinetic plus strain energy at `t = 0` (J per unit thickness).
-    pub initial_energy: f64,
-    /// Energy balance `W_kin + W_eps + W_p - W_ext - W_0` (J); G 5.2 charts
-    /// `W_kin + W_eps - W_0` for elastic bodies without loads.
-    pub energy_error: f64,
-    /// `sum_p m_p v_p` after the step (kg m/s per unit thickness).
-    pub momentum: P2,
-    /// Kinetic energy of the grid velocities at the end of the step with
-    /// the mass used, `v_{n+1}.M v_{n+1} / 2` (J): the grid's view of
-    /// [`Energy::kinetic`], which is measured on the points.
-    pub kinetic_grid: f64,
-    /// Largest grid speed `|v_{n+1}|` of the step (m/s).
-    pub max_speed: f64,
-    pub mass: MassKind,
-    pub stress_update: StressUpdate,
-    pub velocity_update: VelocityUpdate,
-    /// Whether the mass pattern and its symbolic factorisation were reused
-    /// from the previous step.
-    pub pattern_reused: bool,
-    /// Mass conditioning and CFL numbers, every `condition_every` steps.
-    pub conditioning: Option<Conditioning>,
-}
-
-/// Condition numbers of the three mass matrices at one configuration, and
-/// the CFL numbers `C = 1 / (h sqrt(lambda_max(K, M)))` (s/m; G 3.5) with
-/// each. A matrix that is not numerically positive definite has condition
-/// `inf` and CFL number 0.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Conditioning {
-    /// `M` (G (9)), reduced to the free dofs.
-    pub mass_consistent: Condition,
-    /// `M + gamma_M J_G` (G (20)).
-    pub mass_stabilised: Condition,
-    /// `diag(sum_p m_p S_vp)`: exact (largest over smallest entry).
-    pub mass_lumped: Condition,
-    /// With `K` (the material tangent) and `M`; `None` when `K = 0`.
-    pub cfl_consistent: Option<f64>,
-    /// With `K + gamma_K J_G` and `M + gamma_M J_G`.
-    pub cfl_stabilised: Option<f64>,
-    /// With `K` and the lumped mass.
-    pub cfl_lumped: Option<f64>,
-    /// The reduced material tangent `K` and `K + gamma_K J_G` (on demand
-    /// only, [`Simulation::conditioning`]; singular without supports).
-    pub stiffness: Option<Condition>,
-    pub stiffness_stabilised: Option<Condition>,
-}
+pub use crate::report::{Conditioning, DynamicsReport};
 
 /// The mass pattern and symbolic Cholesky of the last step, reused while
 /// the assembly blocks (point groups and ghost faces) stay the same.
@@ -431,7 +381,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
         if !(stretch <= strained.0) {
             strained = (stretch, p);
         }
-        if let Some((w, d)) = crate::newton::commit_point(sim, &mut pts, p, df, r.as_ref()) {
+        if let Some((w, d)) = commit_point(&mut pts, p, df, r.as_ref(), &sim.hencky(p)) {
             strain += w;
             dissipation += d;
         }
@@ -463,7 +413,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
             ),
         });
     }
-    crate::simulation::check_points(&sim.model.grid, &pts, step, &[])?;
+    crate::state::check_points(&sim.model.grid, &pts, step, &[])?;
     // A GIMP domain reaching past the grid's edge loses nodes of its basis,
     // and with them partition of unity and momentum conservation.
     let grid = &sim.model.grid;
@@ -648,15 +598,8 @@ fn generalised_lambda_max(
         }
         y
     };
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut x: Vec<f64> = (0..n)
-        .map(|_| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        })
-        .collect();
+    let mut rand = crate::linalg::XorShift::new(0x2545_f491_4f6c_dd1d);
+    let mut x: Vec<f64> = (0..n).map(|_| rand.centred()).collect();
     let mut last = 0.0;
     for _ in 0..2000 {
         let kx = k_mul(&x);
@@ -721,9 +664,9 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
     // without the ghost term.
     let full = Pattern::new(&map.dofs, &blocks, Storage::Full);
     let zero = vec![[0.0; 2]; map.dofs.node_dof.len()];
-    let it = crate::newton::evaluate(sim, map, &zero);
-    let k = crate::newton::tangent(sim, map, &full, &blocks, faces, &it, 0.0);
-    let ks = crate::newton::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k);
+    let it = crate::bulk::evaluate(sim, map, &zero);
+    let k = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, 0.0);
+    let ks = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k);
     let h = sim.model.grid.h;
     let with = |k: &SparseColMat<usize, f64>, m: &SparseColMat<usize, f64>, f: &Option<Factor>| match f {
         Some(f) => cfl(
@@ -755,57 +698,48 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
     }
 }
 
-impl Simulation {
-    /// Simulated time (s) after the steps taken, for explicit dynamics.
-    pub fn time(&self) -> Option<f64> {
-        let a = &self.model.analysis;
-        (a.kind == crate::scene::AnalysisKind::ExplicitDynamics)
-            .then(|| self.state.step as f64 * a.duration.unwrap_or(0.0) / a.load_steps as f64)
-    }
+/// Mass conditioning and CFL numbers at the current configuration, on
+/// demand (any analysis): the consistent, stabilised (`gamma_M` of the
+/// parameters) and lumped masses, over the dofs the scene's supports
+/// leave free.
+pub(crate) fn conditioning(sim: &Simulation) -> Conditioning {
+    let model = &sim.model;
+    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+    let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
+    let mut c = conditioning_on(sim, &map, &faces);
+    let blocks = blocks_of(&map, &faces);
+    let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let it = crate::bulk::evaluate(sim, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()]);
+    let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
+    let k = |gamma: f64| crate::bulk::tangent(sim, &map, &lower, &blocks, &faces, &it, gamma);
+    c.stiffness = Some(spd_condition(&k(0.0), mode, limit).0);
+    c.stiffness_stabilised = Some(spd_condition(&k(sim.params.gamma_k), mode, limit).0);
+    c
+}
 
-    /// Mass conditioning and CFL numbers at the current configuration, on
-    /// demand (any analysis): the consistent, stabilised (`gamma_M` of the
-    /// parameters) and lumped masses, over the dofs the scene's supports
-    /// leave free.
-    pub fn conditioning(&self) -> Conditioning {
-        let model = &self.model;
-        let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
-        let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
-        let mut c = conditioning_on(self, &map, &faces);
+/// Grid velocities from mapping the point momenta with the stabilised
+/// (`gamma_M` of the parameters), consistent or lumped mass (G (10)),
+/// per active node (m/s); `Err` when the mass cannot be factorised.
+pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(usize, P2)>, String> {
+    let model = &sim.model;
+    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+    let pts = &sim.state.points;
+    let faces = if kind == MassKind::Stabilised {
+        ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells)
+    } else {
+        Vec::new()
+    };
+    let solver = if kind == MassKind::Lumped {
+        MassSolver::Lumped(lumped_mass(&map, &pts.mass))
+    } else {
         let blocks = blocks_of(&map, &faces);
-        let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-        let it = crate::newton::evaluate(self, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()]);
-        let (mode, limit) = (self.params.condition, self.params.dense_limit);
-        let k = |gamma: f64| crate::newton::tangent(self, &map, &lower, &blocks, &faces, &it, gamma);
-        c.stiffness = Some(spd_condition(&k(0.0), mode, limit).0);
-        c.stiffness_stabilised = Some(spd_condition(&k(self.params.gamma_k), mode, limit).0);
-        c
-    }
-
-    /// Grid velocities from mapping the point momenta with the stabilised
-    /// (`gamma_M` of the parameters), consistent or lumped mass (G (10)),
-    /// per active node (m/s); `Err` when the mass cannot be factorised.
-    pub fn map_velocities(&self, kind: MassKind) -> Result<Vec<(usize, P2)>, String> {
-        let model = &self.model;
-        let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
-        let pts = &self.state.points;
-        let faces = if kind == MassKind::Stabilised {
-            ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells)
-        } else {
-            Vec::new()
-        };
-        let solver = if kind == MassKind::Lumped {
-            MassSolver::Lumped(lumped_mass(&map, &pts.mass))
-        } else {
-            let blocks = blocks_of(&map, &faces);
-            let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-            let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, self.params.gamma_m);
-            MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
-        };
-        let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));
-        Ok((0..v.len())
-            .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
-            .map(|n| (n, v[n]))
-            .collect())
-    }
+        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+        let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, sim.params.gamma_m);
+        MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
+    };
+    let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));
+    Ok((0..v.len())
+        .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
+        .map(|n| (n, v[n]))
+        .collect())
 }

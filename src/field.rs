@@ -75,7 +75,7 @@ impl Field {
                 }
                 Field::PlasticStrain => {
                     let m = sim.model().bodies[pts.body[p]].material;
-                    match sim.model().yield_stress[m] {
+                    match sim.model().materials[m].yield_stress {
                         Some(y) if pts.vol0[p] > 0.0 => pts.dissipation[p] / (pts.vol0[p] * y),
                         _ => 0.0,
                     }
@@ -102,12 +102,12 @@ fn error_values(sim: &Simulation) -> Vec<f64> {
                 ExactSolution::FreeMotion { fields, duration } => {
                     crate::exact::velocity_field(&fields[pts.body[p]], pts.x0[p]).map(|v| v * lambda * duration)
                 }
-                _ => exact.displacement(pts.x0[p]).map(|u| u * lambda),
+                _ => exact.fields(pts.x0[p], lambda).1,
             };
             let e = if ue.iter().all(|v| v.is_finite()) {
                 (u[0] - ue[0]).hypot(u[1] - ue[1])
             } else {
-                (pts.stress[p][1] - lambda * exact.stress(pts.x0[p])[1]).abs()
+                (pts.stress[p][1] - exact.fields(pts.x0[p], lambda).0[1]).abs()
             };
             if e.is_finite() {
                 e

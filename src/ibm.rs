@@ -18,10 +18,12 @@
 //! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`
 //! (over the points, and `(B_bar - B)^T` over the band for the same reason).
 
+use crate::assembly::{Dof, DofMap};
 use crate::basis::{stencil, BasisKind, Stencil};
 use crate::exact::ExactSolution;
 use crate::geometry::P2;
 use crate::grid::Grid;
+use crate::material::mul3;
 use crate::quadrature::gauss_legendre;
 use crate::scene::DirichletKind;
 
@@ -497,5 +499,282 @@ pub fn add_atcb(a: &[[[f64; 2]; 3]], c: &[[f64; 3]; 3], b: &[[[f64; 2]; 3]], w: 
                 }
             }
         }
+    }
+}
+
+/// A band block: its nodes and dense row-major `2m x 2m` matrix.
+pub type BandBlock = (Vec<usize>, Vec<f64>);
+
+/// A point's deformation-gradient operator inside a band, per stencil node
+/// and displacement component `l`: `G[l][i][j] = D_il dS/dx_j + dD_il/dx_j S`,
+/// so that `dF = I + sum_k sum_l d_kl G_k[l] + grad(S d^a)` (the finite
+/// deformation form of `B_bar = B1 + B2`).
+pub type GradOp = [[[f64; 2]; 2]; 2];
+
+/// Add `w B_bar^T C (B d^a)` to the nodal force `f` (the strain of the
+/// prescribed field moved to the right-hand side).
+pub fn add_fd(st: &Stencil, bbar: &[Op], c: &[[f64; 3]; 3], da: &[P2], w: f64, f: &mut [P2]) {
+    let g = st.gradient(|n| da[n]);
+    let eps = [g[0][0], g[1][1], g[0][1] + g[1][0]];
+    if eps == [0.0; 3] {
+        return;
+    }
+    let sig = mul3(c, eps);
+    for (k, (n, _, _)) in st.iter().enumerate() {
+        for comp in 0..2 {
+            f[n][comp] += w * (0..3).map(|r| bbar[k][r][comp] * sig[r]).sum::<f64>();
+        }
+    }
+}
+
+/// The elasticity the band takes at each of its points: that of the
+/// material point nearest to it in its cell (or the cells around), so that
+/// bodies of different stiffness under one boundary each get their own,
+/// also where an interface between them crosses a cut cell.
+pub struct BandMaterial {
+    /// Per grid cell: the points in it, with their `C`.
+    cells: Vec<Vec<(P2, [[f64; 3]; 3])>>,
+    nx: usize,
+    ny: usize,
+    /// Volume-weighted mean over all points (for a band point with no
+    /// material point within a cell of it, which only a boundary past the
+    /// material's edge meets).
+    mean: [[f64; 3]; 3],
+}
+
+impl BandMaterial {
+    /// `c_of(p)` is point `p`'s small-strain elasticity matrix (Pa).
+    pub fn new(grid: &Grid, xs: &[P2], vol: &[f64], c_of: &dyn Fn(usize) -> [[f64; 3]; 3]) -> BandMaterial {
+        let mut cells: Vec<Vec<(P2, [[f64; 3]; 3])>> = vec![Vec::new(); grid.num_cells()];
+        let (mut total, mut total_v) = ([[0.0; 3]; 3], 0.0);
+        for p in (0..xs.len()).filter(|&p| vol[p] > 0.0) {
+            let c = c_of(p);
+            for r in 0..3 {
+                for s in 0..3 {
+                    total[r][s] += vol[p] * c[r][s];
+                }
+            }
+            total_v += vol[p];
+            if let Some((i, j)) = grid.cell_of(xs[p]) {
+                cells[j * grid.nx + i].push((xs[p], c));
+            }
+        }
+        let mean = if total_v > 0.0 {
+            total.map(|r| r.map(|v| v / total_v))
+        } else {
+            [[0.0; 3]; 3]
+        };
+        BandMaterial {
+            cells,
+            nx: grid.nx,
+            ny: grid.ny,
+            mean,
+        }
+    }
+
+    /// `C` at a band point `x`.
+    pub fn at(&self, grid: &Grid, x: P2) -> [[f64; 3]; 3] {
+        let Some((i, j)) = grid.cell_of(x) else {
+            return self.mean;
+        };
+        let nearest = |cells: &mut dyn Iterator<Item = usize>| {
+            cells
+                .flat_map(|c| self.cells[c].iter())
+                .min_by(|a, b| dist2(a.0, x).total_cmp(&dist2(b.0, x)))
+                .map(|&(_, c)| c)
+        };
+        if let Some(c) = nearest(&mut std::iter::once(j * self.nx + i)) {
+            return c;
+        }
+        let (i, j) = (i as i64, j as i64);
+        let mut ring = (-1..=1)
+            .flat_map(|dj| (-1..=1).map(move |di| (i + di, j + dj)))
+            .filter(|&(a, b)| a >= 0 && b >= 0 && a < self.nx as i64 && b < self.ny as i64)
+            .map(|(a, b)| b as usize * self.nx + a as usize);
+        nearest(&mut ring).unwrap_or(self.mean)
+    }
+}
+
+fn dist2(a: P2, b: P2) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+impl IbmStep<'_> {
+    /// The band's contribution (C (18)-(27)): per cut cell a block
+    /// `int_band B_bar^T C B_bar - B^T C B` over the grid's bilinear
+    /// functions of that cell, and the band's part of `f_d`,
+    /// `int_band (B_bar - B)^T C B d^a`, per node.
+    ///
+    /// The points integrate the band as if `D = I` (with the plain `B`);
+    /// the band adds what makes its energy that of the trial space: `K2 +
+    /// K2^T + K3` of C (18) and `K1`'s own `D`-weighting there. Leaving the
+    /// last out costs an O(delta/h) stress error in the cells along the
+    /// boundary (docs/verification.md).
+    pub fn band(&self, grid: &Grid, material: &BandMaterial) -> (Vec<BandBlock>, Vec<P2>) {
+        let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
+        let mut band: std::collections::BTreeMap<(u32, u32, u8, u8), BandBlock> = Default::default();
+        for b in self.bs {
+            for (x, w) in b.band_points(grid, self.delta) {
+                let st = grid_stencil(grid, x);
+                let c = material.at(grid, x);
+                let (dm, g) = d_total(self.bs, x, self.delta);
+                let (b1, b2): (Vec<Op>, Vec<Op>) = b_bar(&st, &dm, &g).into_iter().unzip();
+                let entry = band
+                    .entry(st.key)
+                    .or_insert_with(|| (st.nodes[..st.len].to_vec(), vec![0.0; 4 * st.len * st.len]));
+                let plain = plain_b(&st);
+                let bbar = add_ops(&b1, 1.0, &b2);
+                add_atcb(&bbar, &c, &bbar, w, &mut entry.1);
+                add_atcb(&plain, &c, &plain, -w, &mut entry.1);
+                add_fd(&st, &add_ops(&bbar, -1.0, &plain), &c, &self.da, w, &mut f_d);
+            }
+        }
+        (band.into_values().collect(), f_d)
+    }
+
+    /// A point's [`GradOp`] per stencil node when it lies in a band; `None`
+    /// elsewhere (there `D = I` and `dF = I + grad(S (d + d^a))`).
+    pub fn gradient_ops(&self, st: &Stencil, x: P2) -> Option<Vec<GradOp>> {
+        if !in_band(self.bs, x, self.delta) {
+            return None;
+        }
+        let (d, g) = d_total(self.bs, x, self.delta);
+        Some(
+            st.iter()
+                .map(|(_, w, dw)| {
+                    let mut op = [[[0.0; 2]; 2]; 2];
+                    for l in 0..2 {
+                        for i in 0..2 {
+                            for j in 0..2 {
+                                op[l][i][j] = d[i][l] * dw[j] + w * g[j][i][l];
+                            }
+                        }
+                    }
+                    op
+                })
+                .collect(),
+        )
+    }
+
+    /// Move a point at `x` with nodal increments `d` (the unknowns) and the
+    /// prescribed `d^a`: `D S d + S d^a`.
+    pub fn point_increment(&self, st: &Stencil, x: P2, d: &[P2]) -> P2 {
+        let nd = st.interpolate(|n| d[n]);
+        let na = st.interpolate(|n| self.da[n]);
+        if !in_band(self.bs, x, self.delta) {
+            return [nd[0] + na[0], nd[1] + na[1]];
+        }
+        let (dm, _) = d_total(self.bs, x, self.delta);
+        [
+            dm[0][0] * nd[0] + dm[0][1] * nd[1] + na[0],
+            dm[1][0] * nd[0] + dm[1][1] * nd[1] + na[1],
+        ]
+    }
+
+    /// Reports of the boundaries after a step, and the work their reactions
+    /// did in it (trapezoidal).
+    ///
+    /// `residual0` and `residual` are the out-of-balance of the material
+    /// (internal minus every external force, per node) at the start and the
+    /// end of the step: where the implicit boundaries act, it is their
+    /// reaction. Each boundary's reaction sums it over the free dofs of its
+    /// cut cells' nodes; the violation compares the increment on the
+    /// boundary (`D S d + S d^a` at phi = 0) with the prescribed one.
+    #[allow(clippy::too_many_arguments)]
+    pub fn reports(
+        &self,
+        grid: &Grid,
+        dofs: &DofMap,
+        residual0: &[P2],
+        residual: &[P2],
+        nodal_d: &[P2],
+        exact: Option<&ExactSolution>,
+        dlambda: f64,
+    ) -> (Vec<IbmReport>, f64) {
+        // Per boundary: its cut cells and their nodes.
+        let cut: Vec<(Vec<usize>, Vec<usize>)> = self
+            .bs
+            .iter()
+            .map(|b| {
+                let cells = b.cut_cells(grid);
+                let mut nodes: Vec<usize> = cells
+                    .iter()
+                    .flat_map(|&c| grid.cell_nodes(c % grid.nx, c / grid.nx))
+                    .collect();
+                nodes.sort_unstable();
+                nodes.dedup();
+                (cells, nodes)
+            })
+            .collect();
+        let free = |n: usize, c: usize| matches!(dofs.node_dof[n][c], Dof::Free(_));
+        // Work of the reactions: trapezoidal on the increments of the free
+        // dofs of the cut cells' nodes (grid-prescribed dofs count their
+        // reactions' work with the other grid constraints; elsewhere the
+        // out-of-balance is the remap's, not a support's).
+        let mut support: Vec<usize> = cut.iter().flat_map(|(_, nodes)| nodes.iter().copied()).collect();
+        support.sort_unstable();
+        support.dedup();
+        let mut work = 0.0;
+        for &n in &support {
+            for c in (0..2).filter(|&c| free(n, c)) {
+                work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + self.da[n][c]);
+            }
+        }
+        let mut reports = Vec::new();
+        for (b, (cells, nodes)) in self.bs.iter().zip(&cut) {
+            // The support force on the body balances the out-of-balance
+            // force of the material there: R = f_int - f_ext.
+            let mut reaction = [0.0; 2];
+            for &n in nodes {
+                for c in (0..2).filter(|&c| free(n, c)) {
+                    reaction[c] += residual[n][c];
+                }
+            }
+            // Violation: the increment on the boundary (phi = 0) against the
+            // prescribed one, sampled at each piece's ends (for the largest)
+            // and its three Gauss points (for the root mean square along the
+            // boundary).
+            let mut violation = 0.0f64;
+            let (xg, wg) = gauss_legendre(3);
+            let samples: Vec<(f64, f64)> = [(0.0, 0.0), (1.0, 0.0)]
+                .into_iter()
+                .chain(xg.iter().zip(&wg).map(|(x, w)| (0.5 * (1.0 + x), 0.5 * w)))
+                .collect();
+            let (mut sum_sq, mut length) = (0.0, 0.0);
+            for (a, e, _) in b.pieces(grid) {
+                let n = b.normal(a, e);
+                let len = (e[0] - a[0]).hypot(e[1] - a[1]);
+                for &(t, w) in &samples {
+                    let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
+                    let st = grid_stencil(grid, [x[0] + 1e-12 * grid.h * n[0], x[1] + 1e-12 * grid.h * n[1]]);
+                    let (dm, _) = d_total(self.bs, x, self.delta);
+                    let nd = st.interpolate(|k| nodal_d[k]);
+                    let na = st.interpolate(|k| self.da[k]);
+                    let u = [
+                        dm[0][0] * nd[0] + dm[0][1] * nd[1] + na[0],
+                        dm[1][0] * nd[0] + dm[1][1] * nd[1] + na[1],
+                    ];
+                    let target = match (exact, b.exact_field) {
+                        (Some(ex), true) => ex.displacement(x).map(|v| v * dlambda),
+                        _ => [b.value[0] * dlambda, b.value[1] * dlambda],
+                    };
+                    let v = match b.kind {
+                        DirichletKind::Fixed => (u[0] - target[0]).hypot(u[1] - target[1]),
+                        DirichletKind::Roller => (u[0] * n[0] + u[1] * n[1] - b.value[0] * dlambda).abs(),
+                    };
+                    violation = violation.max(v);
+                    sum_sq += w * len * v * v;
+                    length += w * len;
+                }
+            }
+            reports.push(IbmReport {
+                name: b.name.clone(),
+                cut_cells: cells.len(),
+                reaction,
+                violation,
+                violation_rms: if length > 0.0 { (sum_sq / length).sqrt() } else { 0.0 },
+            });
+        }
+        (reports, work)
     }
 }

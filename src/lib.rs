@@ -21,6 +21,7 @@
 pub mod assembly;
 pub mod basis;
 pub mod boundary;
+pub mod bulk;
 pub mod colormap;
 pub mod dynamics;
 pub mod exact;
@@ -29,15 +30,20 @@ pub mod geometry;
 pub mod ghost;
 pub mod grid;
 pub mod ibm;
+pub mod kinematics;
 pub mod linalg;
+pub mod linear;
 pub mod material;
 pub mod model;
 mod newton;
 pub mod points;
 pub mod quadrature;
 pub mod record;
+pub mod report;
+pub mod runner;
 pub mod scene;
 pub mod simulation;
+pub mod state;
 pub mod sweep;
 pub mod tui;
 

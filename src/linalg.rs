@@ -286,21 +286,37 @@ pub fn condition(a: &SparseColMat<usize, f64>, factor: &Factor, dense_limit: usi
     }
 }
 
+/// A reproducible pseudo-random sequence (xorshift64) for start vectors and
+/// test directions: the same seed gives the same numbers on every machine.
+pub struct XorShift(u64);
+
+impl XorShift {
+    pub fn new(seed: u64) -> XorShift {
+        XorShift(seed)
+    }
+
+    /// Uniform in `[0, 1)`.
+    pub fn unit(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in `[-1/2, 1/2)`.
+    pub fn centred(&mut self) -> f64 {
+        self.unit() - 0.5
+    }
+}
+
 /// Largest eigenvalue of a symmetric operator of size `n` by Lanczos with
 /// full reorthogonalisation, from a fixed pseudo-random start (so results
 /// are reproducible). Stops when the largest Ritz value settles to 1e-10
 /// relative or after 120 iterations.
 pub fn lanczos_max(n: usize, op: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    let mut q: Vec<f64> = (0..n)
-        .map(|_| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 + 0.5
-        })
-        .collect();
+    let mut rand = XorShift::new(0x2545_f491_4f6c_dd1d);
+    let mut q: Vec<f64> = (0..n).map(|_| rand.unit() + 0.5).collect();
     let nq = dot(&q, &q).sqrt();
     q.iter_mut().for_each(|v| *v /= nq);
     let mut basis: Vec<Vec<f64>> = vec![q];

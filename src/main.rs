@@ -4,6 +4,7 @@
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use mpmlab::record::Recorder;
+use mpmlab::runner::{Observer, RunEnd};
 use mpmlab::scene::Scene;
 use mpmlab::simulation::{Simulation, StepReport};
 use mpmlab::Model;
@@ -271,6 +272,29 @@ fn row(r: &StepReport) -> String {
     s
 }
 
+/// The run table on stdout, as an observer of the runner.
+struct Table {
+    quiet: bool,
+    last: Option<StepReport>,
+    total_time: f64,
+}
+
+impl Observer for Table {
+    fn stepped(&mut self, _sim: &Simulation, r: &StepReport) -> Option<String> {
+        if !self.quiet {
+            match (&r.dynamics, self.last.is_none()) {
+                (Some(_), true) => out!("{}", dynamics_header(r)),
+                (None, true) => out!("{}", header(Some(r))),
+                _ => {}
+            }
+            out!("{}", if r.dynamics.is_some() { dynamics_row(r) } else { row(r) });
+        }
+        self.total_time += r.timings.total;
+        self.last = Some(r.clone());
+        None
+    }
+}
+
 fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
     let (mut sim, text) = match load(path) {
         Ok(s) => s,
@@ -297,62 +321,36 @@ fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
         m.analysis.load_steps
     );
     let mut code = ExitCode::SUCCESS;
-    let mut last: Option<StepReport> = None;
-    let mut total_time = 0.0;
-    // Ctrl-C or SIGTERM: stop after the current step and close the
-    // recording; a second Ctrl-C ends the process at once.
-    let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        let _ = signal_hook::flag::register_conditional_shutdown(sig, 130, interrupted.clone());
-        let _ = signal_hook::flag::register(sig, interrupted.clone());
+    let mut table = Table {
+        quiet,
+        last: None,
+        total_time: 0.0,
+    };
+    // Ctrl-C or SIGTERM: cancel the running step, keep the last good state
+    // and close the recording; a second one ends the process at once.
+    let stop = mpmlab::runner::stop_on_signals();
+    let mut detached = Vec::new();
+    let end = mpmlab::runner::run(&mut sim, &mut [&mut table, &mut recorder], &stop, &mut detached);
+    for d in &detached {
+        eprintln!("error: {d}; continuing without recording");
+        code = ExitCode::from(3);
     }
-    while !sim.finished() {
-        if interrupted.load(std::sync::atomic::Ordering::SeqCst) {
-            let text = format!("interrupted after step {}: the run stops here", sim.step_index());
+    match end {
+        RunEnd::Finished => {}
+        RunEnd::Failed(f) => {
+            eprintln!("error: {f}");
+            code = ExitCode::from(1);
+        }
+        RunEnd::Stopped { after } => {
+            let text = format!("interrupted after step {after}: the run stops here");
             eprintln!("{text}");
             if let Some(rec) = recorder.as_mut() {
                 let _ = rec.event(&text, "WARN");
             }
             code = ExitCode::from(130);
-            break;
-        }
-        match sim.step_guarded() {
-            Ok(r) => {
-                if !quiet {
-                    match (&r.dynamics, last.is_none()) {
-                        (Some(_), true) => out!("{}", dynamics_header(&r)),
-                        (None, true) => out!("{}", header(Some(&r))),
-                        _ => {}
-                    }
-                    out!(
-                        "{}",
-                        if r.dynamics.is_some() {
-                            dynamics_row(&r)
-                        } else {
-                            row(&r)
-                        }
-                    );
-                }
-                total_time += r.timings.total;
-                if let Some(rec) = recorder.as_mut() {
-                    if let Err(e) = rec.log_step(&r, &sim) {
-                        eprintln!("error: {e}; continuing without recording");
-                        recorder = None;
-                        code = ExitCode::from(3);
-                    }
-                }
-                last = Some(r);
-            }
-            Err(f) => {
-                eprintln!("error: {f}");
-                if let Some(rec) = recorder.as_mut() {
-                    let _ = rec.log_failure(&f);
-                }
-                code = ExitCode::from(1);
-                break;
-            }
         }
     }
+    let (last, total_time) = (table.last, table.total_time);
     if let Some(r) = &last {
         let errs: Vec<String> = r
             .errors

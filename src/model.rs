@@ -8,7 +8,7 @@ use crate::exact::ExactSolution;
 use crate::geometry::{Region, P2};
 use crate::grid::Grid;
 use crate::ibm::IbmBoundary;
-use crate::material::LinearElastic;
+use crate::material::{LinearElastic, Material};
 use crate::points::Points;
 use crate::quadrature::gauss_legendre;
 use crate::scene::{
@@ -58,10 +58,7 @@ pub struct Model {
     pub name: String,
     pub description: String,
     pub grid: Grid,
-    pub materials: Vec<LinearElastic>,
-    /// Von Mises yield strength per material (`None`: elastic).
-    pub yield_stress: Vec<Option<f64>>,
-    pub material_names: Vec<String>,
+    pub materials: Vec<Material>,
     pub bodies: Vec<Body>,
     pub points: Points,
     pub dirichlet: Vec<GridDirichlet>,
@@ -95,16 +92,14 @@ impl Model {
     fn build_unlocated(scene: &Scene) -> Result<Model, FieldError> {
         let grid = build_grid(scene)?;
 
-        let mut materials = Vec::new();
-        let mut yield_stress = Vec::new();
-        let mut material_names: Vec<String> = Vec::new();
+        let mut materials: Vec<Material> = Vec::new();
         if scene.materials.is_empty() {
             return Err(FieldError::new("material", "at least one [[material]] is needed"));
         }
         let finite_kind = scene.analysis.kind != crate::scene::AnalysisKind::QuasiStaticLinear;
         for (k, m) in scene.materials.iter().enumerate() {
             let f = |n: &str| format!("material[{k}].{n}");
-            if material_names.contains(&m.name) {
+            if materials.iter().any(|x| x.name == m.name) {
                 return Err(FieldError::new(
                     f("name"),
                     format!("material `{}` is defined twice", m.name),
@@ -141,7 +136,6 @@ impl Model {
                     "the finite-deformation and explicit analyses are plane strain",
                 ));
             }
-            yield_stress.push(ys);
             // Explicit dynamics needs no stiffness matrix: E = 0 is a
             // stress-free material (G 5.1.2's stretching ghost).
             let explicit = scene.analysis.kind == crate::scene::AnalysisKind::ExplicitDynamics;
@@ -164,13 +158,16 @@ impl Model {
             if !(m.density >= 0.0 && m.density.is_finite()) {
                 return Err(FieldError::new(f("density"), "must be non-negative"));
             }
-            materials.push(LinearElastic {
-                e: m.e,
-                nu: m.nu,
-                density: m.density,
-                plane: m.plane,
+            materials.push(Material {
+                name: m.name.clone(),
+                elastic: LinearElastic {
+                    e: m.e,
+                    nu: m.nu,
+                    density: m.density,
+                    plane: m.plane,
+                },
+                yield_stress: ys,
             });
-            material_names.push(m.name.clone());
         }
 
         if scene.bodies.is_empty() {
@@ -182,9 +179,9 @@ impl Model {
         let mut points = Points::default();
         for (k, b) in scene.bodies.iter().enumerate() {
             let f = |n: &str| format!("body[{k}].{n}");
-            let material = material_names
+            let material = materials
                 .iter()
-                .position(|n| *n == b.material)
+                .position(|m| m.name == b.material)
                 .ok_or_else(|| FieldError::new(f("material"), format!("no material named `{}`", b.material)))?;
             if !(1..=64).contains(&b.points_per_cell) {
                 return Err(FieldError::new(f("points_per_cell"), "must be between 1 and 64"));
@@ -213,7 +210,7 @@ impl Model {
                 ));
             }
             let before = points.len();
-            let density = materials[material].density;
+            let density = materials[material].density();
             if b.placement == Placement::Polar {
                 polar_points(b, density, k, &mut points).map_err(|(field, m)| FieldError::new(f(field), m))?;
             } else if b.placement == Placement::Lattice {
@@ -400,7 +397,7 @@ impl Model {
                 let strained = bodies
                     .iter()
                     .zip(&scene.bodies)
-                    .any(|(b, spec)| materials[b.material].e != 0.0 && spec.velocity_gradient.is_some());
+                    .any(|(b, spec)| materials[b.material].elastic.e != 0.0 && spec.velocity_gradient.is_some());
                 if strained {
                     return Err(FieldError::new(
                         "exact.name",
@@ -438,7 +435,7 @@ impl Model {
         if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
             validate_explicit(a, &dirichlet)?;
             // Explicit dynamics divides by mass: every material needs density.
-            if let Some(k) = materials.iter().position(|m| !(m.density > 0.0)) {
+            if let Some(k) = materials.iter().position(|m| !(m.density() > 0.0)) {
                 return Err(FieldError::new(
                     format!("material[{k}].density"),
                     "explicit dynamics needs a positive density",
@@ -471,16 +468,14 @@ impl Model {
         let mut ibm = Vec::new();
         for (k, spec) in scene.ibm.iter().enumerate() {
             let f = |n: &str| format!("ibm[{k}].{n}");
-            if a.kind != crate::scene::AnalysisKind::QuasiStaticLinear {
+            if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
+                // C (17)-(27) enforce the condition through the band's
+                // stiffness in an implicit equilibrium solve; an explicit
+                // step solves only M a = f and has no stiffness to carry it.
                 return Err(FieldError::new(
                     f("kind"),
-                    "implicit boundaries work with the quasi-static-linear analysis so far",
-                ));
-            }
-            if bodies.iter().any(|b| b.basis != BasisKind::Standard) {
-                return Err(FieldError::new(
-                    f("kind"),
-                    "implicit boundaries need standard-basis bodies so far",
+                    "the implicit boundary method (Cortis et al. 2018) acts through the stiffness of an implicit \
+                     solve; explicit dynamics has none: use a quasi-static analysis or grid-line supports",
                 ));
             }
             let (poly, spline) = match (&spec.boundary, spec.points.is_empty()) {
@@ -622,8 +617,6 @@ impl Model {
             description: scene.scene.description.trim().to_string(),
             grid,
             materials,
-            yield_stress,
-            material_names,
             bodies,
             points,
             dirichlet,
@@ -672,7 +665,7 @@ impl Model {
     pub fn gamma_m(&self) -> f64 {
         self.analysis
             .gamma_m
-            .unwrap_or_else(|| 0.25 * self.materials.iter().map(|m| m.density).fold(0.0, f64::max))
+            .unwrap_or_else(|| 0.25 * self.materials.iter().map(|m| m.density()).fold(0.0, f64::max))
     }
 }
 
@@ -721,12 +714,12 @@ fn build_grid(scene: &Scene) -> Result<Grid, FieldError> {
 
 fn build_exact(
     spec: &ExactSpec,
-    materials: &[LinearElastic],
+    materials: &[Material],
     bodies: &[Body],
     gravity: P2,
 ) -> Result<ExactSolution, FieldError> {
-    let material = materials[bodies[0].material];
-    if bodies.iter().any(|b| materials[b.material] != material) {
+    let material = materials[bodies[0].material].elastic;
+    if bodies.iter().any(|b| materials[b.material].elastic != material) {
         return Err(FieldError::new(
             "exact",
             "exact solutions need every body to share one material",
@@ -756,6 +749,23 @@ fn build_exact(
             about,
             material,
         }),
+        ExactSpec::ConfinedYFinite {
+            stretch,
+            base,
+            angle_deg,
+            about,
+        } => {
+            if !(stretch > 0.0 && stretch.is_finite()) {
+                return Err(FieldError::new("exact.stretch", "must be positive"));
+            }
+            Ok(ExactSolution::ConfinedFinite {
+                stretch,
+                base,
+                angle: angle_deg.to_radians(),
+                about,
+                material,
+            })
+        }
         ExactSpec::Lame {
             pressure,
             r_inner,

@@ -1,184 +1,54 @@
 //! One finite-deformation load step: updated Lagrangian, Newton-Raphson
-//! (G section 2.1; AMPLE; Charlton et al. 2017).
+//! (G section 2.1; AMPLE; Charlton et al. 2017), with every method of the
+//! scene as a contribution to the residual and the tangent.
 //!
 //! Per step, on the configuration at its start (grid reset):
 //!
-//! 1. map points to the grid, find the ghost faces, build the (full,
-//!    non-symmetric) sparsity pattern once;
-//! 2. Newton on the nodal increments `du` (prescribed ones applied from the
-//!    start): per point `dF = I + sum_v du_v (x) grad_n S_v`, the material's
-//!    `P = tau dF^-T` and `A = dP/d dF` ([`Hencky::respond`]);
-//!    `f_int = sum_p P grad_n S V0_p`, `f_G = gamma_K J_G du`;
-//!    residual `r = lambda f_ext - f_int - f_G` on the free dofs, converged
-//!    when `|r| / (|f_ext| + |reactions|) <= tol`; else assemble
-//!    `K = sum_p V0_p A : (grad_n S (x) grad_n S) + gamma_K J_G`, factorise
-//!    with sparse LU (symbolic analysis reused across iterations), solve,
-//!    update `du`;
-//! 3. commit: `F = dF F_n`, `b_e`, Cauchy `s = tau / det F`, positions,
-//!    `V = det(dF) V_n`, GIMP domains `l = l_0 diag(U)` (`F = R U`).
+//! 1. [`Setup::new`]: map points to the grid, collect the contributions
+//!    that hold for the whole step (ghost faces, the implicit boundaries'
+//!    prescribed increments `d^a`, band and per-point `D` operators, the
+//!    dead loads), build the sparsity pattern once;
+//! 2. Newton on the nodal unknowns `d` (grid-prescribed components applied
+//!    from the start), [`Setup::residual`] and [`Setup::tangent`]:
+//!    - material points: `dF = I + grad(S (d + d^a))` (in a band
+//!      `I + sum G d + grad(S d^a)`, [`crate::ibm::GradOp`]), the material's
+//!      `P = tau dF^-T` and `A = dP/d dF` ([`crate::material::hencky`]),
+//!      `f_int = sum_p P : G V0_p`, `K = sum_p V0 G : A : G`;
+//!    - ghost faces: `f_G = gamma_K J_G d`, `K_G = gamma_K J_G` (G (27));
+//!    - implicit boundaries: the band's `K_band d + f_d` with its blocks
+//!      `int B_bar^T C B_bar - B^T C B` (C (18)-(27), on the increment);
+//!    - loads: body forces and point loads at `lambda`, tractions on the
+//!      boundary curves through the points' positions at this iterate
+//!      (a pressure follows the deformed surface), with their load
+//!      stiffness `-d f_ext / d d`;
+//!
+//!    residual `r = f_ext - f_int - f_G - f_band` on the free dofs,
+//!    converged when `|r| / (|f_ext| + |reactions|) <= tol`; else factorise
+//!    (sparse LU, symbolic analysis reused across iterations), solve, update;
+//! 3. commit: `F = dF F_n`, `b_e`, Cauchy `s = tau / det F`, positions
+//!    (`x += D S d + S d^a`), `V = det(dF) V_n`, GIMP domains `l = l_0 diag(U)`.
 //!
 //! Every iteration's residual goes into the report; non-convergence, a
 //! singular tangent and non-finite values are [`StepFailure`]s that leave
 //! the state at the last good step.
 
 use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::boundary::BoundaryReport;
+use crate::bulk::{blocks_of, evaluate_with, group_tangent, Iterate};
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
+use crate::ibm::{self, BandBlock, GradOp, IbmBoundary, IbmStep};
+use crate::kinematics::{commit_point, increment_gradient};
 use crate::linalg::{self, Condition};
-use crate::material::hencky::{right_stretch, Response};
+use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
-use crate::simulation::{Energy, Simulation, StepFailure, StepReport, Timings};
+use crate::state::Simulation;
 use faer::sparse::SparseColMat;
-use nalgebra::{Matrix2, Matrix3};
+use nalgebra::Matrix2;
 use std::time::Instant;
 
 fn norm(v: &[f64]) -> f64 {
     v.iter().map(|x| x * x).sum::<f64>().sqrt()
-}
-
-/// `dF = I + sum_v du_v (x) g_v` over a point's stencil.
-pub(crate) fn increment_gradient(st: &crate::basis::Stencil, du: &[P2]) -> Matrix2<f64> {
-    let g = st.gradient(|n| du[n]);
-    Matrix2::new(1.0 + g[0][0], g[0][1], g[1][0], 1.0 + g[1][1])
-}
-
-pub(crate) fn be_matrix(b: [f64; 4]) -> Matrix3<f64> {
-    Matrix3::new(b[0], b[2], 0.0, b[2], b[1], 0.0, 0.0, 0.0, b[3])
-}
-
-/// Commit point `p`'s deformation increment `df`: `F = dF F_n`,
-/// `V = det(dF) V_n`, GIMP domains `l = l_0 diag(U)` (`F = R U`), and with
-/// the material's response (points with volume) the Cauchy stress
-/// `s = tau / det F`, `b_e`, dissipation and yield flag. Returns the
-/// point's stored energy and its dissipation so far (J).
-pub(crate) fn commit_point(
-    sim: &Simulation,
-    pts: &mut crate::points::Points,
-    p: usize,
-    df: &Matrix2<f64>,
-    r: Option<&Response>,
-) -> Option<(f64, f64)> {
-    let fo = pts.def_grad[p];
-    let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
-    pts.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
-    pts.vol[p] *= df.determinant();
-    let (l0, u) = (pts.lp0[p], right_stretch(&f));
-    pts.lp[p] = [l0[0] * u[(0, 0)], l0[1] * u[(1, 1)]];
-    let r = r?;
-    let s = r.tau / f.determinant();
-    pts.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
-    pts.szz[p] = s[(2, 2)];
-    pts.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
-    pts.dissipation[p] += r.dissipation * pts.vol0[p];
-    pts.yielding[p] = r.yielding;
-    Some((pts.vol0[p] * sim.hencky(p).stored_energy(&r.b_e), pts.dissipation[p]))
-}
-
-pub(crate) struct Iterate {
-    responses: Vec<Option<Response>>,
-    fint_free: Vec<f64>,
-    fint_fixed: Vec<f64>,
-}
-
-/// Material response and internal force for nodal increments `du`.
-pub(crate) fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Iterate {
-    let pts = &sim.state.points;
-    let mut it = Iterate {
-        responses: Vec::with_capacity(pts.len()),
-        fint_free: vec![0.0; map.dofs.n_free],
-        fint_fixed: vec![0.0; map.dofs.constrained.len()],
-    };
-    for p in 0..pts.len() {
-        if pts.vol0[p] == 0.0 {
-            it.responses.push(None);
-            continue;
-        }
-        let st = &map.stencils[p];
-        let r = sim
-            .hencky(p)
-            .respond(&increment_gradient(st, du), &be_matrix(pts.b_e[p]));
-        let v0 = pts.vol0[p];
-        for (n, _, g) in st.iter() {
-            for i in 0..2 {
-                let f = (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * v0;
-                match map.dofs.node_dof[n][i] {
-                    Dof::Free(k) => it.fint_free[k] += f,
-                    Dof::Fixed(k) => it.fint_fixed[k] += f,
-                    Dof::Inactive => {}
-                }
-            }
-        }
-        it.responses.push(Some(r));
-    }
-    it
-}
-
-/// Tangent block of a point group: `sum_p V0 A_ijkl g_a,j g_b,l`.
-fn group_tangent(sim: &Simulation, map: &Mapping, it: &Iterate, b: usize, out: &mut Vec<f64>) {
-    let g = &map.groups[b];
-    let m2 = 2 * g.nodes.len();
-    out.clear();
-    out.resize(m2 * m2, 0.0);
-    for &p in &g.points {
-        let Some(r) = &it.responses[p] else { continue };
-        let st = &map.stencils[p];
-        let v0 = sim.state.points.vol0[p];
-        for a in 0..st.len {
-            let ga = st.dw[a];
-            for bb in 0..st.len {
-                let gb = st.dw[bb];
-                for i in 0..2 {
-                    for k in 0..2 {
-                        let mut s = 0.0;
-                        for j in 0..2 {
-                            for l in 0..2 {
-                                s += r.a[i][j][k][l] * ga[j] * gb[l];
-                            }
-                        }
-                        out[(2 * a + i) * m2 + 2 * bb + k] += v0 * s;
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// Assemble the reduced tangent, with or without the ghost term.
-pub(crate) fn tangent(
-    sim: &Simulation,
-    map: &Mapping,
-    pattern: &Pattern,
-    blocks: &[&[usize]],
-    faces: &[GhostFace],
-    it: &Iterate,
-    gamma: f64,
-) -> SparseColMat<usize, f64> {
-    let ng = map.groups.len();
-    pattern
-        .assemble_with(&map.dofs, blocks, |b, out| {
-            if b < ng {
-                group_tangent(sim, map, it, b, out)
-            } else {
-                faces[b - ng].stiffness(gamma, out)
-            }
-        })
-        .0
-}
-
-/// The ghost faces of this step (none when `gamma_K = 0`).
-fn ghost_faces(sim: &Simulation, map: &Mapping) -> Vec<GhostFace> {
-    if sim.params.gamma_k > 0.0 {
-        ghost::faces_of(&sim.model.grid, map, sim.model.analysis.ghost_cells)
-    } else {
-        Vec::new()
-    }
-}
-
-/// Assembly blocks: the point groups, then the ghost faces.
-pub(crate) fn blocks_of<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
-    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
-    blocks
 }
 
 fn condition_of(k: &SparseColMat<usize, f64>) -> Condition {
@@ -193,6 +63,374 @@ fn condition_of(k: &SparseColMat<usize, f64>) -> Condition {
     }
 }
 
+/// The implicit boundaries' contribution for one Newton step.
+struct Band<'a> {
+    step: IbmStep<'a>,
+    /// Per point: its [`GradOp`]s when it lies in a band.
+    ops: Vec<Option<Vec<GradOp>>>,
+    /// The band's blocks (`K_band`, symmetric) and `f_d` per node.
+    blocks: Vec<BandBlock>,
+    f_d: Vec<P2>,
+}
+
+impl Band<'_> {
+    /// `K_band d + f_d`, per node.
+    fn force(&self, d: &[P2]) -> Vec<P2> {
+        let mut f = self.f_d.clone();
+        for (nodes, k) in &self.blocks {
+            let m2 = 2 * nodes.len();
+            for (a, &na) in nodes.iter().enumerate() {
+                for i in 0..2 {
+                    let row = &k[(2 * a + i) * m2..(2 * a + i + 1) * m2];
+                    f[na][i] += nodes
+                        .iter()
+                        .enumerate()
+                        .map(|(b, &nb)| row[2 * b] * d[nb][0] + row[2 * b + 1] * d[nb][1])
+                        .sum::<f64>();
+                }
+            }
+        }
+        f
+    }
+}
+
+/// A traction-carrying boundary's load stiffness block: the nodes its
+/// force can reach (rows) and the nodes that move its points (columns).
+struct LoadBlock {
+    boundary: usize,
+    nodes: Vec<usize>,
+}
+
+/// What one Newton step keeps fixed over its iterations: the mapping and
+/// every method's contribution.
+struct Setup<'a> {
+    sim: &'a Simulation,
+    step: usize,
+    lambda: f64,
+    map: Mapping,
+    faces: Vec<GhostFace>,
+    gamma: f64,
+    band: Option<Band<'a>>,
+    /// Body forces and point loads at `lambda`, on the free dofs.
+    dead: Vec<f64>,
+    loads: Vec<LoadBlock>,
+    pattern: Pattern,
+}
+
+/// The residual's parts at one iterate.
+struct Residual {
+    it: Iterate,
+    /// `f_ext - f_int - f_G - f_band` on the free dofs.
+    r: Vec<f64>,
+    /// External force at this iterate (free dofs).
+    fext: Vec<f64>,
+    /// The norm the residual is measured against: external forces plus
+    /// reactions (grid supports and implicit boundaries).
+    scale: f64,
+}
+
+impl<'a> Setup<'a> {
+    fn new(
+        sim: &'a Simulation,
+        ibm_now: &'a [IbmBoundary],
+        step: usize,
+        lambda0: f64,
+        lambda1: f64,
+    ) -> Result<Setup<'a>, StepFailure> {
+        let model = &sim.model;
+        let grid = &model.grid;
+        let pts = &sim.state.points;
+        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, lambda1 - lambda0);
+        let gamma = sim.params.gamma_k;
+        let faces = if gamma > 0.0 {
+            ghost::faces_of(grid, &map, model.analysis.ghost_cells)
+        } else {
+            Vec::new()
+        };
+        let band = if ibm_now.is_empty() {
+            None
+        } else {
+            let s = IbmStep::new(
+                ibm_now,
+                grid,
+                &pts.x,
+                sim.params.delta_over_h,
+                lambda1 - lambda0,
+                model.exact.as_ref(),
+            )
+            .map_err(|reason| StepFailure::Singular { step, reason })?;
+            // A grid constraint prescribes a node's whole motion: where an
+            // implicit boundary also puts d^a on that dof, the grid unknown
+            // carries only the rest.
+            for (n, c, u) in map.dofs.constrained.iter_mut() {
+                *u -= s.da[*n][*c];
+            }
+            let ops = (0..pts.len())
+                .map(|p| {
+                    (pts.vol0[p] > 0.0)
+                        .then(|| s.gradient_ops(&map.stencils[p], pts.x[p]))
+                        .flatten()
+                })
+                .collect();
+            let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &|p| sim.material_of(p).d_matrix());
+            let (blocks, f_d) = s.band(grid, &material);
+            Some(Band {
+                step: s,
+                ops,
+                blocks,
+                f_d,
+            })
+        };
+        // Dead loads: body forces and point loads.
+        let forces = sim.dead_forces(&map);
+        let dead: Vec<f64> = forces.ext.iter().map(|f| lambda1 * f).collect();
+        // Tractions: a load stiffness block per loaded boundary over the
+        // nodes its force can reach during the step (the cells the curve
+        // cuts now and their neighbours: a curve moving into a new cell
+        // within the step must keep its rows, or Newton falls to a linear
+        // rate) and the nodes that move its points.
+        let mut loads = Vec::new();
+        for (k, b) in model.boundaries.iter().enumerate() {
+            if b.traction.is_none() {
+                continue;
+            }
+            let spline = b.spline(pts).map_err(|e| StepFailure::Boundary {
+                step,
+                name: b.name.clone(),
+                reason: e.to_string(),
+            })?;
+            let mut nodes: Vec<usize> = crate::boundary::intersect::split(&spline, grid)
+                .iter()
+                .flat_map(|pc| {
+                    let (i, j) = ((pc.cell % grid.nx) as i64, (pc.cell / grid.nx) as i64);
+                    (-1..=1).flat_map(move |dj| (-1..=1).map(move |di| (i + di, j + dj)))
+                })
+                .filter(|&(i, j)| i >= 0 && j >= 0 && i < grid.nx as i64 && j < grid.ny as i64)
+                .flat_map(|(i, j)| grid.cell_nodes(i as usize, j as usize))
+                .chain(
+                    b.points
+                        .iter()
+                        .flat_map(|&p| map.stencils[p].nodes[..map.stencils[p].len].to_vec()),
+                )
+                .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
+                .collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            loads.push(LoadBlock { boundary: k, nodes });
+        }
+        let mut setup = Setup {
+            sim,
+            step,
+            lambda: lambda1,
+            map,
+            faces,
+            gamma,
+            band,
+            dead,
+            loads,
+            pattern: Pattern::new(
+                &crate::assembly::DofMap {
+                    node_dof: Vec::new(),
+                    n_free: 0,
+                    constrained: Vec::new(),
+                    active_nodes: 0,
+                },
+                &[],
+                Storage::Full,
+            ),
+        };
+        setup.pattern = Pattern::new(&setup.map.dofs, &setup.blocks(), Storage::Full);
+        Ok(setup)
+    }
+
+    /// Assembly blocks: point groups, ghost faces, band blocks, load blocks.
+    fn blocks(&self) -> Vec<&[usize]> {
+        let mut blocks = blocks_of(&self.map, &self.faces);
+        if let Some(b) = &self.band {
+            blocks.extend(b.blocks.iter().map(|b| b.0.as_slice()));
+        }
+        blocks.extend(self.loads.iter().map(|l| l.nodes.as_slice()));
+        blocks
+    }
+
+    /// `d^a` per node (zero without implicit boundaries).
+    fn da(&self, n: usize) -> P2 {
+        self.band.as_ref().map_or([0.0; 2], |b| b.step.da[n])
+    }
+
+    /// Where point `p` is at unknowns `d`: `x + D S d + S d^a`.
+    fn moved(&self, p: usize, d: &[P2]) -> P2 {
+        let x = self.sim.state.points.x[p];
+        let st = &self.map.stencils[p];
+        let u = match &self.band {
+            Some(b) => b.step.point_increment(st, x, d),
+            None => st.interpolate(|n| d[n]),
+        };
+        [x[0] + u[0], x[1] + u[1]]
+    }
+
+    /// Nodal forces (at load factor 1) of boundary `k`'s traction with its
+    /// points at `xs` (indexed like the boundary's points).
+    fn traction(&self, k: usize, xs: &[P2]) -> Result<(Vec<(usize, P2)>, BoundaryReport), StepFailure> {
+        let model = &self.sim.model;
+        let b = &model.boundaries[k];
+        let spline = crate::boundary::bspline::BSpline::interpolate(xs, b.closed, &b.corners).map_err(|e| {
+            StepFailure::Boundary {
+                step: self.step,
+                name: b.name.clone(),
+                reason: e.to_string(),
+            }
+        })?;
+        let active = |n: usize| self.map.dofs.node_dof[n][0] != Dof::Inactive;
+        Ok(crate::boundary::traction_forces(
+            b,
+            &spline,
+            &model.grid,
+            model.exact.as_ref(),
+            &active,
+            self.lambda,
+        ))
+    }
+
+    /// The residual and its parts at unknowns `d` (grid-prescribed
+    /// components included).
+    fn residual(&self, d: &[P2]) -> Result<Residual, StepFailure> {
+        let map = &self.map;
+        let total: Vec<P2>;
+        let it = match &self.band {
+            None => evaluate_with(self.sim, map, d, None),
+            Some(b) => {
+                total = d
+                    .iter()
+                    .zip(&b.step.da)
+                    .map(|(a, e)| [a[0] + e[0], a[1] + e[1]])
+                    .collect();
+                evaluate_with(self.sim, map, &total, Some((&b.ops, d, &b.step.da)))
+            }
+        };
+        let mut fext = self.dead.clone();
+        for l in &self.loads {
+            let b = &self.sim.model.boundaries[l.boundary];
+            let xs: Vec<P2> = b.points.iter().map(|&p| self.moved(p, d)).collect();
+            for (n, f) in self.traction(l.boundary, &xs)?.0 {
+                for c in 0..2 {
+                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                        fext[i] += self.lambda * f[c];
+                    }
+                }
+            }
+        }
+        // Ghost force f_G = gamma J_G d on the free rows.
+        let mut fg = vec![0.0; map.dofs.n_free];
+        for f in &self.faces {
+            for row in 0..6 {
+                for c in 0..2 {
+                    let Dof::Free(i) = map.dofs.node_dof[f.nodes[row]][c] else {
+                        continue;
+                    };
+                    fg[i] += self.gamma * (0..6).map(|k| f.j[row][k] * d[f.nodes[k]][c]).sum::<f64>();
+                }
+            }
+        }
+        let mut r: Vec<f64> = (0..map.dofs.n_free)
+            .map(|i| fext[i] - it.fint_free[i] - fg[i])
+            .collect();
+        let mut reaction = norm(&it.fint_fixed);
+        if let Some(b) = &self.band {
+            let fb = b.force(d);
+            let mut sq = 0.0;
+            for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = dofs[c] {
+                        r[i] -= fb[n][c];
+                        sq += fb[n][c] * fb[n][c];
+                    }
+                }
+            }
+            reaction += sq.sqrt();
+        }
+        Ok(Residual {
+            scale: norm(&fext) + reaction,
+            it,
+            r,
+            fext,
+        })
+    }
+
+    /// Load stiffness of boundary block `l` at `d`: `-d f_ext / d d` by
+    /// central differences of the traction in each nodal unknown that
+    /// moves the boundary's points (difference step 1e-6 h: the traction is
+    /// smooth in `d` between grid-line crossings, so the derivative holds to
+    /// about 1e-9 relative). Differencing in `d` rather than in the points'
+    /// positions keeps the motions Newton takes: points of one cell stay
+    /// collinear under `S d`, where B's tangent weights `|q x q|` are not
+    /// differentiable in a single point's position.
+    fn load_block(&self, l: &LoadBlock, d: &[P2], out: &mut Vec<f64>) -> Result<(), StepFailure> {
+        let b = &self.sim.model.boundaries[l.boundary];
+        let m2 = 2 * l.nodes.len();
+        out.clear();
+        out.resize(m2 * m2, 0.0);
+        let local = |n: usize| l.nodes.binary_search(&n).ok();
+        let eps = 1e-6 * self.sim.model.grid.h;
+        let mut columns: Vec<usize> = b
+            .points
+            .iter()
+            .flat_map(|&p| self.map.stencils[p].nodes[..self.map.stencils[p].len].to_vec())
+            .filter(|&n| local(n).is_some())
+            .collect();
+        columns.sort_unstable();
+        columns.dedup();
+        let mut shifted = d.to_vec();
+        for &m in &columns {
+            let bb = local(m).expect("filtered above");
+            for k in 0..2 {
+                let mut at = |delta: f64| -> Result<Vec<(usize, P2)>, StepFailure> {
+                    shifted[m][k] = d[m][k] + delta;
+                    let xs: Vec<P2> = b.points.iter().map(|&p| self.moved(p, &shifted)).collect();
+                    shifted[m][k] = d[m][k];
+                    Ok(self.traction(l.boundary, &xs)?.0)
+                };
+                let (fp, fm) = (at(eps)?, at(-eps)?);
+                for (sign, forces) in [(1.0, fp), (-1.0, fm)] {
+                    for (n, f) in forces {
+                        let Some(a) = local(n) else { continue };
+                        for i in 0..2 {
+                            out[(2 * a + i) * m2 + 2 * bb + k] -= sign * self.lambda * f[i] / (2.0 * eps);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The tangent of the residual at `d` (its negative derivative), with
+    /// the ghost term scaled by `gamma`.
+    fn tangent(&self, res: &Residual, d: &[P2], gamma: f64) -> Result<SparseColMat<usize, f64>, StepFailure> {
+        let (ng, nf) = (self.map.groups.len(), self.faces.len());
+        let nb = self.band.as_ref().map_or(0, |b| b.blocks.len());
+        let blocks = self.blocks();
+        let mut failure = None;
+        let ops = self.band.as_ref().map(|b| b.ops.as_slice());
+        let (k, _) = self.pattern.assemble_with(&self.map.dofs, &blocks, |b, out| {
+            if b < ng {
+                group_tangent(self.sim, &self.map, &res.it, ops, b, out)
+            } else if b < ng + nf {
+                self.faces[b - ng].stiffness(gamma, out)
+            } else if b < ng + nf + nb {
+                out.clear();
+                out.extend_from_slice(&self.band.as_ref().expect("nb > 0").blocks[b - ng - nf].1);
+            } else if let Err(e) = self.load_block(&self.loads[b - ng - nf - nb], d, out) {
+                failure = Some(e);
+            }
+        });
+        match failure {
+            Some(e) => Err(e),
+            None => Ok(k),
+        }
+    }
+}
+
 pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let steps = sim.load_steps();
@@ -201,53 +439,29 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let mut timings = Timings::default();
     let params = sim.params.clone();
 
-    // 1. Map points, ghost faces, pattern.
-    let model = &sim.model;
-    let map = Mapping::build(
-        &model.grid,
-        &sim.state.points,
-        &model.bodies,
-        &model.dirichlet,
-        lambda1 - lambda0,
-    );
-    let (forces, boundaries) = sim.nodal_forces(&map, step, lambda1)?;
-    let fext: Vec<f64> = forces.ext.iter().map(|f| lambda1 * f).collect();
-    let gamma = params.gamma_k;
-    let faces = ghost_faces(sim, &map);
-    let blocks = blocks_of(&map, &faces);
-    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Full);
+    // 1. Map points and collect the step's contributions.
+    let ibm_now = sim.ibm_boundaries_now(step)?;
+    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1)?;
+    let map = &setup.map;
+    // Loads at the start of the step (for the work's trapezoidal rule) and
+    // each boundary as it is then.
+    let (forces, boundaries) = sim.nodal_forces(map, step, lambda1)?;
     timings.assembly += start.elapsed().as_secs_f64();
 
     // 2. Newton.
-    let mut du = vec![[0.0; 2]; model.grid.num_nodes()];
+    let mut d = vec![[0.0; 2]; sim.model.grid.num_nodes()];
     for &(n, c, v) in &map.dofs.constrained {
-        du[n][c] = v;
+        d[n][c] = v;
     }
     let mut residuals = Vec::new();
     let mut symbolic = None;
     // The last tangent and its LU factor, reused for the condition number.
     let mut last = None;
     let mut iterations = 0;
-    let it = loop {
+    let res = loop {
         let t = Instant::now();
-        let it = evaluate(sim, &map, &du);
-        // Ghost force f_G = gamma J_G du on the free rows.
-        let mut fg = vec![0.0; map.dofs.n_free];
-        for f in &faces {
-            for r in 0..6 {
-                for c in 0..2 {
-                    let Dof::Free(row) = map.dofs.node_dof[f.nodes[r]][c] else {
-                        continue;
-                    };
-                    fg[row] += gamma * (0..6).map(|k| f.j[r][k] * du[f.nodes[k]][c]).sum::<f64>();
-                }
-            }
-        }
-        let r: Vec<f64> = (0..map.dofs.n_free)
-            .map(|i| fext[i] - it.fint_free[i] - fg[i])
-            .collect();
-        let denom = norm(&fext) + norm(&it.fint_fixed);
-        let rel = norm(&r) / if denom > 0.0 { denom } else { 1.0 };
+        let res = setup.residual(&d)?;
+        let rel = norm(&res.r) / if res.scale > 0.0 { res.scale } else { 1.0 };
         residuals.push(rel);
         timings.assembly += t.elapsed().as_secs_f64();
         if !sim.report_progress(step, iterations, rel) {
@@ -261,7 +475,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             });
         }
         if rel <= params.tolerance {
-            break it;
+            break res;
         }
         if iterations >= params.max_iterations {
             return Err(StepFailure::NotConverged {
@@ -271,7 +485,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             });
         }
         let t = Instant::now();
-        let k = tangent(sim, &map, &pattern, &blocks, &faces, &it, gamma);
+        let k = setup.tangent(&res, &d, setup.gamma)?;
         timings.assembly += t.elapsed().as_secs_f64();
         let t = Instant::now();
         if symbolic.is_none() {
@@ -286,7 +500,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         })?;
         timings.factorisation += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let dd = linalg::solve_lu(&lu, &r, false);
+        let dd = linalg::solve_lu(&lu, &res.r, false);
         timings.solve += t.elapsed().as_secs_f64();
         if dd.iter().any(|v| !v.is_finite()) {
             return Err(StepFailure::Singular {
@@ -297,10 +511,10 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
                 ),
             });
         }
-        for (n, d) in map.dofs.node_dof.iter().enumerate() {
+        for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
             for c in 0..2 {
-                if let Dof::Free(i) = d[c] {
-                    du[n][c] += dd[i];
+                if let Dof::Free(i) = dofs[c] {
+                    d[n][c] += dd[i];
                 }
             }
         }
@@ -315,43 +529,112 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     } else {
         let with = match &last {
             Some((k, lu)) => linalg::one_norm_condition(k, lu),
-            None => condition_of(&tangent(sim, &map, &pattern, &blocks, &faces, &it, gamma)),
+            None => condition_of(&setup.tangent(&res, &d, setup.gamma)?),
         };
-        let without =
-            (!faces.is_empty()).then(|| condition_of(&tangent(sim, &map, &pattern, &blocks, &faces, &it, 0.0)));
+        let without = if setup.faces.is_empty() {
+            None
+        } else {
+            Some(condition_of(&setup.tangent(&res, &d, 0.0)?))
+        };
         (Some(with), without)
     };
     timings.condition = t.elapsed().as_secs_f64();
 
     // 3. Commit into a copy of the points.
     let t = Instant::now();
+    let it = &res.it;
     let mut pts = sim.state.points.clone();
     let (mut strain_energy, mut dissipation) = (0.0, 0.0);
+    let total: Vec<P2> = (0..d.len())
+        .map(|n| {
+            let a = setup.da(n);
+            [d[n][0] + a[0], d[n][1] + a[1]]
+        })
+        .collect();
     for p in 0..pts.len() {
         let st = &map.stencils[p];
-        let u = st.interpolate(|n| du[n]);
-        let df = increment_gradient(st, &du);
-        pts.x[p] = [pts.x[p][0] + u[0], pts.x[p][1] + u[1]];
-        if let Some((w, d)) = commit_point(sim, &mut pts, p, &df, it.responses[p].as_ref()) {
+        let x = setup.moved(p, &d);
+        let df = match setup.band.as_ref().and_then(|b| b.ops[p].as_ref()) {
+            Some(ops) => {
+                let ga = st.gradient(|n| setup.da(n));
+                let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
+                for (k, (n, _, _)) in st.iter().enumerate() {
+                    for l in 0..2 {
+                        for i in 0..2 {
+                            for j in 0..2 {
+                                df[(i, j)] += ops[k][l][i][j] * d[n][l];
+                            }
+                        }
+                    }
+                }
+                df
+            }
+            None => increment_gradient(st, &total),
+        };
+        pts.x[p] = x;
+        if let Some((w, diss)) = commit_point(&mut pts, p, &df, it.responses[p].as_ref(), &sim.hencky(p)) {
             strain_energy += w;
-            dissipation += d;
+            dissipation += diss;
         }
     }
-    crate::simulation::check_points(&sim.model.grid, &pts, step, &residuals)?;
+    crate::state::check_points(&sim.model.grid, &pts, step, &residuals)?;
+    // Work: free dofs carry f_ext (trapezoidal between the step's start and
+    // end, tractions on their curves then), prescribed dofs their support
+    // force, implicit boundaries their reactions.
     let mut work = 0.0;
-    for (n, d) in map.dofs.node_dof.iter().enumerate() {
+    let traction = !setup.loads.is_empty();
+    for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
         for c in 0..2 {
-            match d[c] {
-                Dof::Free(i) => work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * du[n][c],
-                Dof::Fixed(i) => work += 0.5 * (forces.int_fixed[i] + it.fint_fixed[i]) * du[n][c],
+            match dofs[c] {
+                Dof::Free(i) if traction => {
+                    work += 0.5 * (lambda0 * forces.ext[i] + res.fext[i]) * total[n][c];
+                }
+                Dof::Free(i) => work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * total[n][c],
+                Dof::Fixed(i) => work += 0.5 * (forces.int_fixed[i] + it.fint_fixed[i]) * total[n][c],
                 Dof::Inactive => {}
             }
         }
     }
-    let max_increment = du.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
+    let mut ibm_reports = Vec::new();
+    if let Some(b) = &setup.band {
+        // Out-of-balance of the points at the start (zero increment) and
+        // the end of the step: the implicit boundaries' reactions.
+        let zero = vec![[0.0; 2]; d.len()];
+        let it0 = evaluate_with(sim, map, &zero, Some((&b.ops, &zero, &zero)));
+        let per_node = |fint: &[f64], ext: &dyn Fn(usize) -> f64| {
+            let mut out = vec![[0.0; 2]; d.len()];
+            for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = dofs[c] {
+                        out[n][c] = fint[i] - ext(i);
+                    }
+                }
+            }
+            out
+        };
+        let r0 = per_node(&it0.fint_free, &|i| lambda0 * forces.ext[i]);
+        let r1 = per_node(&it.fint_free, &|i| res.fext[i]);
+        let (reports, w) = b.step.reports(
+            &sim.model.grid,
+            &map.dofs,
+            &r0,
+            &r1,
+            &d,
+            sim.model.exact.as_ref(),
+            lambda1 - lambda0,
+        );
+        ibm_reports = reports;
+        work += w;
+    }
+    let max_increment = total.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
     timings.update = t.elapsed().as_secs_f64();
 
-    sim.commit(pts, step, work, &map, &faces, iterations);
+    let faces = setup.faces.clone();
+    let active = map.active_cells.clone();
+    let (n_free, active_nodes, active_cells) = (map.dofs.n_free, map.dofs.active_nodes, map.active_cells.len());
+    let fext_norm = norm(&res.fext);
+    drop(setup);
+    sim.commit_quasi_static(pts, step, work, active, &faces, iterations, lambda1 - lambda0);
     let errors = match &sim.model.exact {
         Some(e) => e.errors(&sim.state.points, lambda1),
         None => Vec::new(),
@@ -361,10 +644,10 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         step,
         load_steps: steps,
         load_factor: lambda1,
-        unknowns: map.dofs.n_free,
-        active_nodes: map.dofs.active_nodes,
-        active_cells: map.active_cells.len(),
-        residual_norm: norm(&fext),
+        unknowns: n_free,
+        active_nodes,
+        active_cells,
+        residual_norm: fext_norm,
         residuals,
         timings,
         energy: Energy {
@@ -377,7 +660,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         condition_unstabilised,
         iterations,
         ghost_faces: faces.len(),
-        ibm: Vec::new(),
+        ibm: ibm_reports,
         errors,
         max_increment,
         boundaries,
@@ -385,90 +668,62 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     })
 }
 
-impl Simulation {
-    /// The finite-strain material of point `p`'s body.
-    pub(crate) fn hencky(&self, p: usize) -> crate::material::hencky::Hencky {
-        let body = &self.model.bodies[self.state.points.body[p]];
-        let m = self.model.materials[body.material];
-        crate::material::hencky::Hencky {
-            e: m.e,
-            nu: m.nu,
-            yield_stress: self.model.yield_stress[body.material],
-        }
+/// Largest relative difference between the assembled finite-deformation
+/// tangent (every contribution: points, ghost, implicit boundaries,
+/// traction load stiffness) and central finite differences of the
+/// out-of-balance force, at a reproducible pseudo-random trial increment
+/// of size `amplitude * h`, along 4 pseudo-random directions, for the
+/// next step's load factor. A diagnostic for developers and the test
+/// suite; `Err` when the step's contributions cannot be built.
+pub(crate) fn tangent_check(sim: &Simulation, amplitude: f64) -> Result<f64, StepFailure> {
+    let step = sim.state.step + 1;
+    let steps = sim.load_steps();
+    let ibm_now = sim.ibm_boundaries_now(step)?;
+    let (l0, l1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
+    let setup = Setup::new(sim, &ibm_now, step, l0, l1)?;
+    let map = &setup.map;
+    let mut rand = crate::linalg::XorShift::new(0x9e37_79b9_7f4a_7c15);
+    let h = sim.model.grid.h;
+    let mut d = vec![[0.0; 2]; sim.model.grid.num_nodes()];
+    for &(n, c, v) in &map.dofs.constrained {
+        d[n][c] = v;
     }
-
-    /// Largest relative difference between the assembled finite-deformation
-    /// tangent (with the ghost term) and central finite differences of the
-    /// out-of-balance force, at a reproducible pseudo-random trial increment
-    /// of size `amplitude * h`, along 4 pseudo-random directions. A
-    /// diagnostic for developers and the test suite.
-    pub fn tangent_check(&self, amplitude: f64) -> f64 {
-        let model = &self.model;
-        let map = Mapping::build(&model.grid, &self.state.points, &model.bodies, &model.dirichlet, 0.0);
-        let gamma = self.params.gamma_k;
-        let faces = ghost_faces(self, &map);
-        let blocks = blocks_of(&map, &faces);
-        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Full);
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rand = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let h = model.grid.h;
-        let mut du = vec![[0.0; 2]; model.grid.num_nodes()];
-        for (n, d) in map.dofs.node_dof.iter().enumerate() {
-            for c in 0..2 {
-                if let Dof::Free(_) = d[c] {
-                    du[n][c] = amplitude * h * rand();
-                }
+    for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(_) = dofs[c] {
+                d[n][c] = amplitude * h * rand.centred();
             }
         }
-        // Internal plus ghost force on the free dofs.
-        let force = |du: &[P2]| {
-            let it = evaluate(self, &map, du);
-            let mut f = it.fint_free;
-            for face in &faces {
-                for r in 0..6 {
-                    for c in 0..2 {
-                        if let Dof::Free(row) = map.dofs.node_dof[face.nodes[r]][c] {
-                            f[row] += gamma * (0..6).map(|k| face.j[r][k] * du[face.nodes[k]][c]).sum::<f64>();
-                        }
+    }
+    let res = setup.residual(&d)?;
+    let k = setup.tangent(&res, &d, setup.gamma)?;
+    let (cp, ri, val) = (k.col_ptr(), k.row_idx(), k.val());
+    let mut worst = 0.0f64;
+    for _ in 0..4 {
+        let v: Vec<f64> = (0..map.dofs.n_free).map(|_| rand.centred()).collect();
+        let mut kv = vec![0.0; map.dofs.n_free];
+        for c in 0..k.ncols() {
+            for idx in cp[c]..cp[c + 1] {
+                kv[ri[idx]] += val[idx] * v[c];
+            }
+        }
+        let eps = 1e-6 * h;
+        let shifted = |sign: f64| -> Result<Vec<f64>, StepFailure> {
+            let mut s = d.clone();
+            for (n, dd) in map.dofs.node_dof.iter().enumerate() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = dd[c] {
+                        s[n][c] += sign * eps * v[i];
                     }
                 }
             }
-            f
+            Ok(setup.residual(&s)?.r)
         };
-        let it = evaluate(self, &map, &du);
-        let k = tangent(self, &map, &pattern, &blocks, &faces, &it, gamma);
-        let (cp, ri, val) = (k.col_ptr(), k.row_idx(), k.val());
-        let mut worst = 0.0f64;
-        for _ in 0..4 {
-            let v: Vec<f64> = (0..map.dofs.n_free).map(|_| rand()).collect();
-            let mut kv = vec![0.0; map.dofs.n_free];
-            for c in 0..k.ncols() {
-                for idx in cp[c]..cp[c + 1] {
-                    kv[ri[idx]] += val[idx] * v[c];
-                }
-            }
-            let eps = 1e-6 * h;
-            let shifted = |sign: f64| {
-                let mut d = du.clone();
-                for (n, dd) in map.dofs.node_dof.iter().enumerate() {
-                    for c in 0..2 {
-                        if let Dof::Free(i) = dd[c] {
-                            d[n][c] += sign * eps * v[i];
-                        }
-                    }
-                }
-                force(&d)
-            };
-            let (fp, fm) = (shifted(1.0), shifted(-1.0));
-            let fd: Vec<f64> = fp.iter().zip(&fm).map(|(a, b)| (a - b) / (2.0 * eps)).collect();
-            let diff: Vec<f64> = fd.iter().zip(&kv).map(|(a, b)| a - b).collect();
-            worst = worst.max(norm(&diff) / norm(&kv).max(1e-300));
-        }
-        worst
+        let (rp, rm) = (shifted(1.0)?, shifted(-1.0)?);
+        // K = -dr/dd.
+        let fd: Vec<f64> = rp.iter().zip(&rm).map(|(a, b)| -(a - b) / (2.0 * eps)).collect();
+        let diff: Vec<f64> = fd.iter().zip(&kv).map(|(a, b)| a - b).collect();
+        worst = worst.max(norm(&diff) / norm(&kv).max(1e-300));
     }
+    Ok(worst)
 }

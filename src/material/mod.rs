@@ -45,6 +45,40 @@ impl LinearElastic {
     }
 }
 
+/// A material of the scene: its elasticity and, for von Mises plasticity,
+/// its yield strength. One type for every analysis: the small-strain
+/// paths read [`Material::d_matrix`], the finite-deformation and explicit
+/// paths [`Material::hencky`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    pub elastic: LinearElastic,
+    /// Von Mises yield strength `rho_y = sqrt(2 J2)` (Pa); `None`: elastic.
+    pub yield_stress: Option<f64>,
+}
+
+impl Material {
+    /// The small-strain elasticity matrix `C` (Pa), Voigt `[xx, yy, xy]`.
+    pub fn d_matrix(&self) -> [[f64; 3]; 3] {
+        self.elastic.d_matrix()
+    }
+
+    /// Mass density (kg/m^3).
+    pub fn density(&self) -> f64 {
+        self.elastic.density
+    }
+
+    /// The finite-strain response: Hencky elasticity with the same `E`,
+    /// `nu`, and von Mises plasticity where a yield strength is given.
+    pub fn hencky(&self) -> hencky::Hencky {
+        hencky::Hencky {
+            e: self.elastic.e,
+            nu: self.elastic.nu,
+            yield_stress: self.yield_stress,
+        }
+    }
+}
+
 /// `D e` for a 3x3 matrix and a Voigt vector.
 pub fn mul3(d: &[[f64; 3]; 3], e: [f64; 3]) -> [f64; 3] {
     [

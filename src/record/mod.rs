@@ -407,3 +407,21 @@ impl Recorder {
         self.check(r)
     }
 }
+
+/// The recorder follows runs through the one runner: a write error
+/// detaches it with the reason (the run goes on unrecorded).
+impl crate::runner::Observer for Recorder {
+    fn stepped(&mut self, sim: &Simulation, report: &StepReport) -> Option<String> {
+        self.log_step(report, sim)
+            .err()
+            .map(|e| format!("recording stopped: {e}"))
+    }
+    fn failed(&mut self, _sim: &Simulation, failure: &StepFailure) -> Option<String> {
+        self.log_failure(failure)
+            .err()
+            .map(|e| format!("recording stopped: {e}"))
+    }
+    fn note(&mut self, text: &str, level: &str) -> Option<String> {
+        self.event(text, level).err().map(|e| format!("recording stopped: {e}"))
+    }
+}

@@ -21,6 +21,7 @@ pub mod driver;
 pub mod presets;
 pub mod svg;
 
+use crate::runner::{self, Observer, RunEnd};
 use crate::scene::Scene;
 use crate::simulation::{Simulation, StepFailure};
 use crate::Model;
@@ -326,31 +327,32 @@ pub fn run_file(path: &Path) -> RunResult {
     };
     r.steps_total = sim.load_steps();
     let start = Instant::now();
-    while !sim.finished() {
-        match sim.step_guarded() {
-            Ok(rep) => {
-                let t = rep.timings;
-                r.assembly_s += t.assembly;
-                r.factorisation_s += t.factorisation;
-                r.solve_s += t.solve;
-                r.condition_s += t.condition;
-                r.unknowns = rep.unknowns;
-                r.iterations += rep.iterations.max(1);
-                r.condition = rep.condition.map_or(f64::NAN, |c| c.value);
-                r.errors = rep.errors.iter().map(|e| (e.name.to_string(), e.value)).collect();
-                r.steps_done = rep.step;
-            }
-            Err(f) => {
-                r.failed_step = f.step();
-                r.failure = one_line(&f);
-                break;
-            }
-        }
+    let never = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    if let RunEnd::Failed(f) = runner::run(&mut sim, &mut [&mut r], &never, &mut Vec::new()) {
+        r.failed_step = f.step();
+        r.failure = one_line(&f);
     }
     r.wall_s = start.elapsed().as_secs_f64();
     r.completed = sim.finished() && r.failed_step == 0;
     r.peak_rss_kb = peak_rss_kb();
     r
+}
+
+/// A run's row follows its steps through the runner.
+impl Observer for RunResult {
+    fn stepped(&mut self, _sim: &Simulation, rep: &crate::simulation::StepReport) -> Option<String> {
+        let t = rep.timings;
+        self.assembly_s += t.assembly;
+        self.factorisation_s += t.factorisation;
+        self.solve_s += t.solve;
+        self.condition_s += t.condition;
+        self.unknowns = rep.unknowns;
+        self.iterations += rep.iterations.max(1);
+        self.condition = rep.condition.map_or(f64::NAN, |c| c.value);
+        self.errors = rep.errors.iter().map(|e| (e.name.to_string(), e.value)).collect();
+        self.steps_done = rep.step;
+        None
+    }
 }
 
 fn one_line(f: &StepFailure) -> String {

@@ -263,7 +263,7 @@ impl App {
             status: String::new(),
             quit: false,
             running: false,
-            default_gamma_m: 0.25 * sim.model().materials.iter().map(|m| m.density).fold(0.0, f64::max),
+            default_gamma_m: 0.25 * sim.model().materials.iter().map(|m| m.density()).fold(0.0, f64::max),
             zoom: 1.0,
             pan: [0.0; 2],
             chart: if sim.time().is_some() {
@@ -617,7 +617,7 @@ pub fn parse_setting(text: &str) -> Result<Command, String> {
 /// The scale of `gamma_K` shown and stepped from: the stiffest material's
 /// Young's modulus (1 Pa when every material is stress-free).
 fn modulus(sim: &Simulation) -> f64 {
-    let e = sim.model().materials.iter().map(|m| m.e).fold(0.0, f64::max);
+    let e = sim.model().materials.iter().map(|m| m.elastic.e).fold(0.0, f64::max);
     if e > 0.0 {
         e
     } else {

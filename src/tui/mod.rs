@@ -13,6 +13,7 @@ pub mod sweep;
 
 use crate::field::Field;
 use crate::record::Recorder;
+use crate::runner;
 use crate::simulation::Simulation;
 use app::{Action, App, Command, Update, View};
 use ratatui::crossterm::event::{
@@ -69,11 +70,8 @@ fn set_params(
     event: &str,
 ) {
     sim.set_params(params.clone());
-    if let Some(rec) = recorder.as_mut() {
-        if let Err(e) = rec.event(event, "INFO") {
-            let _ = updates.send(Update::Message(format!("recording stopped: {e}")));
-            *recorder = None;
-        }
+    for m in runner::note(&mut [recorder], event, "INFO") {
+        let _ = updates.send(Update::Message(m));
     }
     let _ = updates.send(Update::Params(params));
 }
@@ -97,45 +95,24 @@ fn engine(
     let mut field = Field::SigmaYy;
     // The state before the last step and that step's outcome, for redo.
     let mut before: Option<(crate::simulation::Snapshot, Option<app::Outcome>)> = None;
-    let warn = |updates: &mpsc::Sender<Update>, r: Result<(), crate::record::RecordError>| {
-        if let Err(e) = r {
-            let _ = updates.send(Update::Message(format!("recording stopped: {e}")));
-            return false;
+    let tell = |updates: &mpsc::Sender<Update>, detached: Vec<String>| {
+        for m in detached {
+            let _ = updates.send(Update::Message(m));
         }
-        true
     };
     while let Ok(cmd) = commands.recv() {
         match cmd {
             Command::Cancel => {}
             Command::Step => {
                 cancel.store(false, Ordering::SeqCst);
-                before = Some((sim.snapshot(), None));
-                match sim.step_guarded() {
-                    Ok(report) => {
-                        if let Some(b) = before.as_mut() {
-                            b.1 = Some(Ok(report.clone()));
-                        }
-                        if let Some(rec) = recorder.as_mut() {
-                            let r = rec.log_step(&report, &sim);
-                            if !warn(&updates, r) {
-                                recorder = None;
-                            }
-                        }
-                        let _ = updates.send(Update::Stepped(Box::new(report), Box::new(View::of(&sim, field))));
-                    }
-                    Err(failure) => {
-                        if let Some(b) = before.as_mut() {
-                            b.1 = Some(Err(failure.clone()));
-                        }
-                        if let Some(rec) = recorder.as_mut() {
-                            let r = rec.log_failure(&failure);
-                            if !warn(&updates, r) {
-                                recorder = None;
-                            }
-                        }
-                        let _ = updates.send(Update::Failed(failure));
-                    }
-                }
+                let snap = sim.snapshot();
+                let s = runner::step(&mut sim, &mut [&mut recorder]);
+                tell(&updates, s.detached);
+                before = Some((snap, Some(s.result.clone())));
+                let _ = updates.send(match s.result {
+                    Ok(report) => Update::Stepped(Box::new(report), Box::new(View::of(&sim, field))),
+                    Err(failure) => Update::Failed(failure),
+                });
             }
             Command::Redo => {
                 let Some((snap, Some(old))) = before.take() else {
@@ -153,22 +130,10 @@ fn engine(
                     p.gamma_m,
                     p.tolerance
                 );
-                if let Some(rec) = recorder.as_mut() {
-                    let r = rec.event(&text, "INFO");
-                    if !warn(&updates, r) {
-                        recorder = None;
-                    }
-                }
-                let new = sim.step_guarded();
-                if let Some(rec) = recorder.as_mut() {
-                    let r = match &new {
-                        Ok(report) => rec.log_step(report, &sim),
-                        Err(f) => rec.log_failure(f),
-                    };
-                    if !warn(&updates, r) {
-                        recorder = None;
-                    }
-                }
+                tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
+                let s = runner::step(&mut sim, &mut [&mut recorder]);
+                tell(&updates, s.detached);
+                let new = s.result;
                 before = Some((snap, Some(new.clone())));
                 let _ = updates.send(Update::Redone(Box::new((old, new)), Box::new(View::of(&sim, field))));
             }

@@ -1,0 +1,206 @@
+//! The material points' contribution to a finite-deformation step, shared
+//! by the Newton and the explicit drivers: the material's response and
+//! internal force at trial nodal increments, `f_int = sum_p P : G V0_p`,
+//! and the tangent blocks of the point groups, `sum_p V0 G_a : A : G_b`
+//! (with `G_a[l] = e_l (x) grad S_a`, or the implicit boundary's
+//! [`GradOp`] for points inside a band).
+
+use crate::assembly::{Dof, Mapping, Pattern};
+use crate::geometry::P2;
+use crate::ghost::GhostFace;
+use crate::ibm::GradOp;
+use crate::kinematics::{be_matrix, increment_gradient};
+use crate::material::hencky::Response;
+use crate::state::Simulation;
+use faer::sparse::SparseColMat;
+use nalgebra::Matrix2;
+
+/// The points' response at one trial increment.
+pub(crate) struct Iterate {
+    pub(crate) responses: Vec<Option<Response>>,
+    pub(crate) fint_free: Vec<f64>,
+    pub(crate) fint_fixed: Vec<f64>,
+}
+
+/// The implicit boundaries as the points see them: per point its band
+/// operators (if it lies in a band), the unknowns `d` and `d^a` per node.
+pub(crate) type BandView<'a> = (&'a [Option<Vec<GradOp>>], &'a [P2], &'a [P2]);
+
+/// Material response and internal force of the points for nodal
+/// increments `total` (`d + d^a`), with the in-band points' operators
+/// `ops` acting on the unknowns `d` (and `grad(S d^a)`).
+pub(crate) fn evaluate_with(
+    sim: &Simulation,
+    map: &Mapping,
+    total: &[P2],
+    band: Option<BandView>,
+) -> Iterate {
+    let pts = &sim.state.points;
+    let mut it = Iterate {
+        responses: Vec::with_capacity(pts.len()),
+        fint_free: vec![0.0; map.dofs.n_free],
+        fint_fixed: vec![0.0; map.dofs.constrained.len()],
+    };
+    let mut add = |n: usize, i: usize, f: f64| match map.dofs.node_dof[n][i] {
+        Dof::Free(k) => it.fint_free[k] += f,
+        Dof::Fixed(k) => it.fint_fixed[k] += f,
+        Dof::Inactive => {}
+    };
+    for p in 0..pts.len() {
+        if pts.vol0[p] == 0.0 {
+            it.responses.push(None);
+            continue;
+        }
+        let st = &map.stencils[p];
+        let v0 = pts.vol0[p];
+        let ops = band.and_then(|(ops, d, da)| ops[p].as_ref().map(|o| (o, d, da)));
+        let r = match ops {
+            None => {
+                let r = sim
+                    .hencky(p)
+                    .respond(&increment_gradient(st, total), &be_matrix(pts.b_e[p]));
+                for (n, _, g) in st.iter() {
+                    for i in 0..2 {
+                        add(n, i, (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * v0);
+                    }
+                }
+                r
+            }
+            Some((ops, d, da)) => {
+                let ga = st.gradient(|n| da[n]);
+                let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
+                for (k, (n, _, _)) in st.iter().enumerate() {
+                    for l in 0..2 {
+                        for i in 0..2 {
+                            for j in 0..2 {
+                                df[(i, j)] += ops[k][l][i][j] * d[n][l];
+                            }
+                        }
+                    }
+                }
+                let r = sim.hencky(p).respond(&df, &be_matrix(pts.b_e[p]));
+                for (k, (n, _, _)) in st.iter().enumerate() {
+                    for l in 0..2 {
+                        let mut f = 0.0;
+                        for i in 0..2 {
+                            for j in 0..2 {
+                                f += r.p[(i, j)] * ops[k][l][i][j];
+                            }
+                        }
+                        add(n, l, f * v0);
+                    }
+                }
+                r
+            }
+        };
+        it.responses.push(Some(r));
+    }
+    it
+}
+
+/// Material response and internal force for nodal increments `du`
+/// (no implicit boundaries).
+pub(crate) fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Iterate {
+    evaluate_with(sim, map, du, None)
+}
+
+/// Tangent block of a point group: `sum_p V0 A_ijkl g_a,j g_b,l`, or with
+/// a band operator `sum_p V0 G_a : A : G_b`.
+pub(crate) fn group_tangent(
+    sim: &Simulation,
+    map: &Mapping,
+    it: &Iterate,
+    ops: Option<&[Option<Vec<GradOp>>]>,
+    b: usize,
+    out: &mut Vec<f64>,
+) {
+    let g = &map.groups[b];
+    let m2 = 2 * g.nodes.len();
+    out.clear();
+    out.resize(m2 * m2, 0.0);
+    for &p in &g.points {
+        let Some(r) = &it.responses[p] else { continue };
+        let st = &map.stencils[p];
+        let v0 = sim.state.points.vol0[p];
+        if let Some(op) = ops.and_then(|o| o[p].as_ref()) {
+            for a in 0..st.len {
+                for l in 0..2 {
+                    // (G_a[l] : A)_kq
+                    let mut ga = [[0.0; 2]; 2];
+                    for i in 0..2 {
+                        for j in 0..2 {
+                            let gij = op[a][l][i][j];
+                            if gij == 0.0 {
+                                continue;
+                            }
+                            for k in 0..2 {
+                                for q in 0..2 {
+                                    ga[k][q] += gij * r.a[i][j][k][q];
+                                }
+                            }
+                        }
+                    }
+                    for bb in 0..st.len {
+                        for m in 0..2 {
+                            let mut s = 0.0;
+                            for k in 0..2 {
+                                for q in 0..2 {
+                                    s += ga[k][q] * op[bb][m][k][q];
+                                }
+                            }
+                            out[(2 * a + l) * m2 + 2 * bb + m] += v0 * s;
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        for a in 0..st.len {
+            let ga = st.dw[a];
+            for bb in 0..st.len {
+                let gb = st.dw[bb];
+                for i in 0..2 {
+                    for k in 0..2 {
+                        let mut s = 0.0;
+                        for j in 0..2 {
+                            for l in 0..2 {
+                                s += r.a[i][j][k][l] * ga[j] * gb[l];
+                            }
+                        }
+                        out[(2 * a + i) * m2 + 2 * bb + k] += v0 * s;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Assemble the reduced material tangent of the point groups and ghost
+/// faces (no implicit boundaries or loads), with or without the ghost term.
+pub(crate) fn tangent(
+    sim: &Simulation,
+    map: &Mapping,
+    pattern: &Pattern,
+    blocks: &[&[usize]],
+    faces: &[GhostFace],
+    it: &Iterate,
+    gamma: f64,
+) -> SparseColMat<usize, f64> {
+    let ng = map.groups.len();
+    pattern
+        .assemble_with(&map.dofs, blocks, |b, out| {
+            if b < ng {
+                group_tangent(sim, map, it, None, b, out)
+            } else {
+                faces[b - ng].stiffness(gamma, out)
+            }
+        })
+        .0
+}
+
+/// Assembly blocks: the point groups, then the ghost faces.
+pub(crate) fn blocks_of<'a>(map: &'a Mapping, faces: &'a [GhostFace]) -> Vec<&'a [usize]> {
+    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+    blocks
+}

@@ -1,0 +1,478 @@
+//! One quasi-static small-strain load step (the linear driver).
+//!
+//! A quasi-static small-strain step `n -> n+1` (B section 2, C section 2),
+//! on the configuration at the start of the step:
+//!
+//! 1. map points to the grid: stencils, active nodes, dofs ([`Mapping`]);
+//! 2. assemble `K = sum_p B_p^T D B_p V_p`, `f_ext(lambda_{n+1})` and
+//!    `f_int = sum_p B_p^T s_p V_p`;
+//! 3. factorise the reduced `K` (sparse Cholesky);
+//! 4. solve `K du = f_ext - f_int - K_fc du_c` for the free increments;
+//! 5. update points: `de = B du`, `s += D de`, `x += N du`, `V *= det(I + grad du)`;
+//!    the grid is then forgotten.
+//!
+//! Failures (singular system, residual above tolerance, non-finite values)
+//! are returned as [`StepFailure`] and leave the state at the last good step.
+
+use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::geometry::P2;
+use crate::ghost;
+use crate::ibm::{self, IbmReport, IbmStep};
+use crate::linalg::{self, Condition};
+use crate::material::mul3;
+use crate::points::Points;
+use crate::report::{Energy, StepFailure, StepReport, Timings};
+use crate::scene::ConditionMode;
+use crate::state::{check_points, Simulation};
+use std::time::Instant;
+
+/// One quasi-static small-strain load step.
+pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
+    let step = sim.state.step + 1;
+    let lambda0 = sim.state.step as f64 / sim.load_steps() as f64;
+    let lambda1 = step as f64 / sim.load_steps() as f64;
+    let start = Instant::now();
+    let mut timings = Timings::default();
+
+    // 1-2. Map points to the grid and assemble.
+    let mut map = Mapping::build(
+        &sim.model.grid,
+        &sim.state.points,
+        &sim.model.bodies,
+        &sim.model.dirichlet,
+        lambda1 - lambda0,
+    );
+    let d_of = |p: usize| sim.material_of(p).d_matrix();
+    let grid = &sim.model.grid;
+    let pts = &sim.state.points;
+    // Implicit boundaries: prescribed increments d^a on the nodes of cut
+    // cells, and the band integrated as extra blocks (C (18)-(27)).
+    let ibm_now = sim.ibm_boundaries_now(step)?;
+    let ibm_step = if ibm_now.is_empty() {
+        None
+    } else {
+        Some(
+            IbmStep::new(
+                &ibm_now,
+                grid,
+                &pts.x,
+                sim.params.delta_over_h,
+                lambda1 - lambda0,
+                sim.model.exact.as_ref(),
+            )
+            .map_err(|reason| StepFailure::Singular { step, reason })?,
+        )
+    };
+    // A grid constraint prescribes a node's whole motion: where an
+    // implicit boundary also puts a value d^a on that dof, the grid
+    // unknown carries only the rest.
+    if let Some(s) = &ibm_step {
+        for (n, c, u) in map.dofs.constrained.iter_mut() {
+            *u -= s.da[*n][*c];
+        }
+    }
+    let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
+    let mut band: Vec<ibm::BandBlock> = Vec::new();
+    if let Some(s) = &ibm_step {
+        let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &d_of);
+        (band, f_d) = s.band(grid, &material);
+        for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+            let st = &map.stencils[p];
+            let (bbar, _) = s.point_b(st, pts.x[p]);
+            ibm::add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
+        }
+    }
+    // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
+    let gamma = sim.params.gamma_k;
+    let faces = if gamma > 0.0 {
+        ghost::faces_of(grid, &map, sim.model.analysis.ghost_cells)
+    } else {
+        Vec::new()
+    };
+    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+    blocks.extend(band.iter().map(|b| b.0.as_slice()));
+    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let (ng, nb) = (map.groups.len(), band.len());
+    let stiffness = |with_ghost: bool| {
+        pattern.assemble_with(&map.dofs, &blocks, |b, out| {
+            if b < ng {
+                let g = &map.groups[b];
+                match &ibm_step {
+                    Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
+                        let m2 = 2 * g.nodes.len();
+                        out.clear();
+                        out.resize(m2 * m2, 0.0);
+                        for &p in &g.points {
+                            let (bb, _) = s.point_b(&map.stencils[p], pts.x[p]);
+                            ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
+                        }
+                    }
+                    _ => map.group_stiffness(g, pts, &d_of, out),
+                }
+            } else if b < ng + nb {
+                out.clear();
+                out.extend_from_slice(&band[b - ng].1);
+            } else {
+                faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
+            }
+        })
+    };
+    let (k, coupling) = stiffness(true);
+    let (mut forces, boundaries) = sim.nodal_forces(&map, step, lambda1)?;
+    if let Some(s) = &ibm_step {
+        // Points inside a band work through B_bar: correct f_int.
+        for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
+            let st = &map.stencils[p];
+            let (bb, plain) = s.point_b(st, pts.x[p]);
+            for (k, (n, _, _)) in st.iter().enumerate() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                        let sig = pts.stress[p];
+                        forces.int[i] +=
+                            pts.vol[p] * (0..3).map(|r| (bb[k][r][c] - plain[k][r][c]) * sig[r]).sum::<f64>();
+                    }
+                }
+            }
+        }
+    }
+    let rhs: Vec<f64> = (0..map.dofs.n_free)
+        .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
+        .collect();
+    let mut rhs = rhs;
+    for (n, d) in map.dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                rhs[i] -= f_d[n][c];
+            }
+        }
+    }
+    let residual_norm = norm(&rhs);
+    timings.assembly = start.elapsed().as_secs_f64();
+
+    // 3. Factorise.
+    let t = Instant::now();
+    let factor = linalg::cholesky(&k).map_err(|e| StepFailure::Singular {
+        step,
+        reason: e.to_string(),
+    })?;
+    timings.factorisation = t.elapsed().as_secs_f64();
+
+    // 4. Solve and check the residual; ill-conditioned systems (tiny
+    // point volumes near boundaries) get up to two rounds of iterative
+    // refinement with the same factor, each recorded as a residual.
+    let t = Instant::now();
+    let rel_of = |v: &[f64]| {
+        if residual_norm > 0.0 {
+            norm(v) / residual_norm
+        } else {
+            norm(v)
+        }
+    };
+    let mut du = linalg::solve(&factor, &rhs);
+    let mut lin = residual_of(&k, &du, &rhs);
+    let mut rel = rel_of(&lin);
+    let mut residuals = vec![if residual_norm > 0.0 { 1.0 } else { 0.0 }, rel];
+    for _ in 0..2 {
+        if !(rel > sim.params.tolerance) {
+            break;
+        }
+        let neg: Vec<f64> = lin.iter().map(|v| -v).collect();
+        let correction = linalg::solve(&factor, &neg);
+        du.iter_mut().zip(&correction).for_each(|(a, c)| *a += c);
+        lin = residual_of(&k, &du, &rhs);
+        rel = rel_of(&lin);
+        residuals.push(rel);
+    }
+    timings.solve = t.elapsed().as_secs_f64();
+    if !sim.report_progress(step, 1, rel) {
+        return Err(StepFailure::Cancelled { step, residuals });
+    }
+    if !residual_norm.is_finite() || !rel.is_finite() || du.iter().any(|v| !v.is_finite()) {
+        return Err(StepFailure::NonFinite {
+            step,
+            what: "residual or displacement increment".into(),
+            residuals,
+        });
+    }
+    if rel > sim.params.tolerance {
+        return Err(StepFailure::NotConverged {
+            step,
+            residuals,
+            tolerance: sim.params.tolerance,
+        });
+    }
+
+    // Condition number of the reduced stiffness.
+    let t = Instant::now();
+    let condition = match sim.params.condition {
+        ConditionMode::Off => None,
+        ConditionMode::Auto => Some(linalg::condition(&k, &factor, sim.params.dense_limit)),
+        ConditionMode::Dense => Some(linalg::condition(&k, &factor, usize::MAX)),
+        ConditionMode::Lanczos => Some(linalg::condition(&k, &factor, 0)),
+    };
+    // Without the ghost term, for comparison (infinite when singular).
+    let condition_unstabilised = match (&condition, faces.is_empty()) {
+        (Some(c), false) => {
+            let (k0, _) = stiffness(false);
+            let limit = match sim.params.condition {
+                ConditionMode::Dense => usize::MAX,
+                ConditionMode::Lanczos => 0,
+                _ => sim.params.dense_limit,
+            };
+            Some(match linalg::cholesky(&k0) {
+                Ok(f0) => linalg::condition(&k0, &f0, limit),
+                Err(_) => Condition {
+                    value: f64::INFINITY,
+                    lambda_min: 0.0,
+                    ..*c
+                },
+            })
+        }
+        _ => None,
+    };
+    timings.condition = t.elapsed().as_secs_f64();
+
+    // 5. Update the points.
+    let t = Instant::now();
+    let nodal_d = nodal_increments(&map, &du);
+    // Points move with N (d + d^a); those inside a band with D N d + N d^a.
+    let nodal: Vec<P2> = match &ibm_step {
+        Some(s) => nodal_d
+            .iter()
+            .zip(&s.da)
+            .map(|(a, b)| [a[0] + b[0], a[1] + b[1]])
+            .collect(),
+        None => nodal_d.clone(),
+    };
+    let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
+    let (mut points, fint_fixed_new) = updated_points(sim, &map, &nodal);
+    let mut ibm_reports = Vec::new();
+    let mut ibm_work = 0.0;
+    if let Some(s) = &ibm_step {
+        for p in (0..points.len()).filter(|&p| s.in_band[p]) {
+            let st = &map.stencils[p];
+            let (bb, plain) = s.point_b(st, pts.x[p]);
+            let (dm, _) = ibm::d_total(s.bs, pts.x[p], s.delta);
+            let mut de = [0.0; 3];
+            let mut dx = [0.0; 2];
+            for (k, (n, w, _)) in st.iter().enumerate() {
+                for c in 0..2 {
+                    for r in 0..3 {
+                        de[r] += (bb[k][r][c] - plain[k][r][c]) * nodal_d[n][c];
+                    }
+                    for i in 0..2 {
+                        dx[i] += ((dm[i][c]) - if i == c { 1.0 } else { 0.0 }) * w * nodal_d[n][c];
+                    }
+                }
+            }
+            let ds = mul3(&d_of(p), de);
+            for r in 0..3 {
+                points.stress[p][r] += ds[r];
+                points.strain[p][r] += de[r];
+            }
+            points.x[p] = [points.x[p][0] + dx[0], points.x[p][1] + dx[1]];
+        }
+        let (reports, work) = point_ibm_reports(sim, &map, s, &points, &nodal_d, &forces.ext, lambda0, lambda1);
+        ibm_reports = reports;
+        ibm_work = work;
+    }
+    check_points(&sim.model.grid, &points, step, &residuals)?;
+    // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
+    let mut work = 0.0;
+    for i in 0..map.dofs.n_free {
+        work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * du[i];
+    }
+    for (c, &(n, comp, u)) in map.dofs.constrained.iter().enumerate() {
+        let total = u + ibm_step.as_ref().map_or(0.0, |s| s.da[n][comp]);
+        work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * total;
+    }
+    if let Some(s) = &ibm_step {
+        // Body forces also work on the prescribed field's motion N d^a.
+        for (n, d) in map.dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = d[c] {
+                    work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * s.da[n][c];
+                }
+            }
+        }
+        work += ibm_work;
+    }
+    // The stresses' work over the step, on the volumes it started with:
+    // what the trapezoidal work of loads and reactions pays for. (For
+    // one step it is 1/2 s:e V; over several, 1/2 s:e on the updated
+    // volumes would differ from it by the volume change.)
+    let old = &sim.state.points;
+    let strain_energy = sim.state.strain_energy
+        + (0..points.len())
+            .map(|p| {
+                let (s0, s1) = (old.stress[p], points.stress[p]);
+                let de = [0, 1, 2].map(|k| points.strain[p][k] - old.strain[p][k]);
+                0.5 * (0..3).map(|k| (s0[k] + s1[k]) * de[k]).sum::<f64>() * old.vol[p]
+            })
+            .sum::<f64>();
+    timings.update = t.elapsed().as_secs_f64();
+
+    // Commit.
+    sim.commit_quasi_static(
+        points,
+        step,
+        work,
+        map.active_cells.clone(),
+        &faces,
+        1,
+        lambda1 - lambda0,
+    );
+    sim.state.strain_energy = strain_energy;
+    let errors = match &sim.model.exact {
+        Some(e) => e.errors(&sim.state.points, lambda1),
+        None => Vec::new(),
+    };
+    timings.total = start.elapsed().as_secs_f64();
+    Ok(StepReport {
+        step,
+        load_steps: sim.load_steps(),
+        load_factor: lambda1,
+        unknowns: map.dofs.n_free,
+        active_nodes: map.dofs.active_nodes,
+        active_cells: map.active_cells.len(),
+        residual_norm,
+        residuals,
+        timings,
+        energy: Energy {
+            strain: strain_energy,
+            external_work: sim.state.external_work,
+            plastic_dissipation: 0.0,
+            kinetic: 0.0,
+        },
+        condition,
+        condition_unstabilised,
+        iterations: 1,
+        ghost_faces: faces.len(),
+        ibm: ibm_reports,
+        errors,
+        max_increment,
+        boundaries,
+        dynamics: None,
+    })
+}
+
+/// Reports of the implicit boundaries after an update (reaction from
+/// the out-of-balance of the new stresses on the nodes of each
+/// boundary's cut cells; violation sampled along the boundary), and the
+/// work their reactions did in the step (trapezoidal).
+#[allow(clippy::too_many_arguments)]
+fn point_ibm_reports(
+    sim: &Simulation,
+    map: &Mapping,
+    s: &IbmStep,
+    new: &Points,
+    nodal_d: &[P2],
+    ext: &[f64],
+    lambda0: f64,
+    lambda1: f64,
+) -> (Vec<IbmReport>, f64) {
+    let grid = &sim.model.grid;
+    let old = &sim.state.points;
+    // Out-of-balance of the material (internal minus every external
+    // force on the free dofs) at the start and end of the step: where
+    // the implicit boundaries act, it is their reaction.
+    let mut residual = vec![[0.0; 2]; grid.num_nodes()];
+    let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
+    for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
+        let st = &map.stencils[p];
+        let (bb, _) = s.point_b(st, old.x[p]);
+        for (k, (n, _, _)) in st.iter().enumerate() {
+            for c in 0..2 {
+                let f = |sig: [f64; 3]| (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
+                residual[n][c] += f(new.stress[p]);
+                residual0[n][c] += f(old.stress[p]);
+            }
+        }
+    }
+    for (n, d) in map.dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                residual[n][c] -= lambda1 * ext[i];
+                residual0[n][c] -= lambda0 * ext[i];
+            }
+        }
+    }
+    s.reports(
+        grid,
+        &map.dofs,
+        &residual0,
+        &residual,
+        nodal_d,
+        sim.model.exact.as_ref(),
+        lambda1 - lambda0,
+    )
+}
+
+/// Points after applying nodal increments, and the internal force of
+/// the new stresses on the prescribed dofs (start-of-step geometry).
+fn updated_points(sim: &Simulation, map: &Mapping, nodal: &[P2]) -> (Points, Vec<f64>) {
+    let mut pts = sim.state.points.clone();
+    let mut fint_fixed = vec![0.0; map.dofs.constrained.len()];
+    for p in 0..pts.len() {
+        let st = &map.stencils[p];
+        let du = st.interpolate(|n| nodal[n]);
+        let g = st.gradient(|n| nodal[n]);
+        let de = [g[0][0], g[1][1], g[0][1] + g[1][0]];
+        let d = sim.model.materials[sim.model.bodies[pts.body[p]].material].d_matrix();
+        let ds = mul3(&d, de);
+        let v = pts.vol[p];
+        for k in 0..3 {
+            pts.stress[p][k] += ds[k];
+            pts.strain[p][k] += de[k];
+        }
+        if v > 0.0 {
+            let s = pts.stress[p];
+            for (n, _, [dx, dy]) in st.iter() {
+                let fi = [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v];
+                for c in 0..2 {
+                    if let Dof::Fixed(i) = map.dofs.node_dof[n][c] {
+                        fint_fixed[i] += fi[c];
+                    }
+                }
+            }
+        }
+        pts.x[p] = [pts.x[p][0] + du[0], pts.x[p][1] + du[1]];
+        let det = (1.0 + g[0][0]) * (1.0 + g[1][1]) - g[0][1] * g[1][0];
+        pts.vol[p] *= det;
+        pts.lp[p] = [pts.lp[p][0] * (1.0 + g[0][0]), pts.lp[p][1] * (1.0 + g[1][1])];
+    }
+    (pts, fint_fixed)
+}
+/// Increment of every grid node: solved values on free dofs, prescribed
+/// increments on fixed ones, zero elsewhere.
+fn nodal_increments(map: &Mapping, du: &[f64]) -> Vec<P2> {
+    map.dofs
+        .node_dof
+        .iter()
+        .map(|d| {
+            let mut u = [0.0; 2];
+            for c in 0..2 {
+                u[c] = match d[c] {
+                    Dof::Free(i) => du[i],
+                    Dof::Fixed(i) => map.dofs.constrained[i].2,
+                    Dof::Inactive => 0.0,
+                };
+            }
+            u
+        })
+        .collect()
+}
+
+/// `K du - rhs`.
+fn residual_of(k: &faer::sparse::SparseColMat<usize, f64>, du: &[f64], rhs: &[f64]) -> Vec<f64> {
+    linalg::sym_lower_mul(k, du)
+        .iter()
+        .zip(rhs)
+        .map(|(a, b)| a - b)
+        .collect()
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}

@@ -1,0 +1,265 @@
+//! What a step reports to its observers: [`StepReport`] on success,
+//! [`StepFailure`] otherwise, [`Progress`] while it runs. Plain data,
+//! shared by every driver (linear, Newton, explicit) and every observer.
+
+use crate::boundary::BoundaryReport;
+use crate::exact::ErrorNorm;
+use crate::geometry::P2;
+use crate::ibm::IbmReport;
+use crate::linalg::Condition;
+use crate::scene::{MassKind, StressUpdate, VelocityUpdate};
+use std::fmt;
+
+/// Wall-clock time of each phase of a step (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    pub assembly: f64,
+    pub factorisation: f64,
+    pub solve: f64,
+    pub condition: f64,
+    pub update: f64,
+    pub total: f64,
+}
+
+/// Energies after a step (J per unit thickness).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Energy {
+    /// `sum_p 1/2 s_p : e_p V_p`.
+    pub strain: f64,
+    /// Work of loads and supports, trapezoidal in each step.
+    pub external_work: f64,
+    /// Plastic work dissipated so far.
+    pub plastic_dissipation: f64,
+    /// `sum_p 1/2 m_p |v_p|^2` (explicit dynamics; 0 for quasi-static steps).
+    pub kinetic: f64,
+}
+
+/// What one successful step did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepReport {
+    /// 1-based step number.
+    pub step: usize,
+    pub load_steps: usize,
+    pub load_factor: f64,
+    /// Free unknowns of the reduced system.
+    pub unknowns: usize,
+    pub active_nodes: usize,
+    pub active_cells: usize,
+    /// `|r|` of the step's right-hand side (N).
+    pub residual_norm: f64,
+    /// Relative residuals per iteration: `1` before the solve, then
+    /// `|K du - r| / |r|` after it and after each round of iterative
+    /// refinement (taken only while above the tolerance, at most two).
+    pub residuals: Vec<f64>,
+    pub timings: Timings,
+    pub energy: Energy,
+    pub condition: Option<Condition>,
+    /// With ghost stabilisation: the condition number of the tangent without it.
+    pub condition_unstabilised: Option<Condition>,
+    /// Newton iterations of this step (1 for a linear step).
+    pub iterations: usize,
+    /// Faces carrying ghost stabilisation this step.
+    pub ghost_faces: usize,
+    /// Each implicit boundary: reaction and constraint violation.
+    pub ibm: Vec<IbmReport>,
+    /// Errors against the scene's exact solution, if it names one.
+    pub errors: Vec<ErrorNorm>,
+    /// Largest nodal displacement increment of the step (m).
+    pub max_increment: f64,
+    /// Each boundary as it was at the start of the step, with its traction
+    /// resultant at this step's load factor.
+    pub boundaries: Vec<BoundaryReport>,
+    /// Explicit dynamics: time, energy balance, mass conditioning.
+    pub dynamics: Option<DynamicsReport>,
+}
+
+/// Why a step did not complete. The state stays at the last good step.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StepFailure {
+    /// Every load step has been taken.
+    Finished { steps: usize },
+    /// The reduced stiffness could not be factorised.
+    Singular { step: usize, reason: String },
+    /// The solve's residual stayed above the tolerance.
+    NotConverged {
+        step: usize,
+        residuals: Vec<f64>,
+        tolerance: f64,
+    },
+    /// A residual, increment or stress was NaN or infinite.
+    NonFinite {
+        step: usize,
+        what: String,
+        residuals: Vec<f64>,
+    },
+    /// A boundary's spline could not be built from its points.
+    Boundary { step: usize, name: String, reason: String },
+    /// A point (or, with `domain`, a corner of its GIMP domain, where the
+    /// basis would lose nodes and partition of unity) would leave the grid.
+    LeftGrid {
+        step: usize,
+        point: usize,
+        position: P2,
+        domain: bool,
+    },
+    /// An explicit step blew up: energy or grid velocities beyond bounds.
+    Diverged { step: usize, reason: String },
+    /// The engine panicked (a bug): caught by [`crate::Simulation::step_guarded`];
+    /// the state is the last good step.
+    Internal { step: usize, message: String },
+    /// The observer cancelled the step ([`crate::Simulation::set_progress`]); the
+    /// state is the last good step.
+    Cancelled { step: usize, residuals: Vec<f64> },
+}
+
+/// Progress inside a step, for observers: each Newton iteration's (or the
+/// linear solve's) relative residual as it is computed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Progress {
+    pub step: usize,
+    /// 0 before the first correction.
+    pub iteration: usize,
+    pub residual: f64,
+}
+
+/// Called with each [`Progress`]; returning `false` cancels the step.
+pub type ProgressHook = Box<dyn FnMut(&Progress) -> bool + Send>;
+
+impl StepFailure {
+    pub fn step(&self) -> usize {
+        match self {
+            StepFailure::Finished { steps } => *steps,
+            StepFailure::Singular { step, .. }
+            | StepFailure::NotConverged { step, .. }
+            | StepFailure::NonFinite { step, .. }
+            | StepFailure::Boundary { step, .. }
+            | StepFailure::LeftGrid { step, .. }
+            | StepFailure::Diverged { step, .. }
+            | StepFailure::Internal { step, .. }
+            | StepFailure::Cancelled { step, .. } => *step,
+        }
+    }
+
+    pub fn residuals(&self) -> &[f64] {
+        match self {
+            StepFailure::NotConverged { residuals, .. }
+            | StepFailure::NonFinite { residuals, .. }
+            | StepFailure::Cancelled { residuals, .. } => residuals,
+            _ => &[],
+        }
+    }
+}
+
+impl fmt::Display for StepFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StepFailure::Finished { steps } => write!(f, "all {steps} load steps are done"),
+            StepFailure::Singular { step, reason } => write!(f, "step {step} failed: singular system: {reason}"),
+            StepFailure::NotConverged {
+                step,
+                residuals,
+                tolerance,
+            } => write!(
+                f,
+                "step {step} failed: residual {:.3e} above tolerance {tolerance:.1e} (residuals {})",
+                residuals.last().copied().unwrap_or(f64::NAN),
+                fmt_residuals(residuals)
+            ),
+            StepFailure::LeftGrid {
+                step,
+                point,
+                position,
+                domain,
+            } => write!(
+                f,
+                "step {step} failed: point {point}{} would reach ({:.4}, {:.4}), outside the grid; enlarge the grid",
+                if *domain { "'s GIMP domain" } else { "" },
+                position[0],
+                position[1]
+            ),
+            StepFailure::Diverged { step, reason } => write!(f, "step {step} failed: diverged: {reason}"),
+            StepFailure::Cancelled { step, residuals } => write!(
+                f,
+                "step {step} cancelled (residuals {}); the state is that of step {}",
+                fmt_residuals(residuals),
+                step - 1
+            ),
+            StepFailure::Internal { step, message } => write!(
+                f,
+                "step {step} failed: internal error (a bug in mpmlab; please report it with the scene): {message}"
+            ),
+            StepFailure::Boundary { step, name, reason } => {
+                write!(f, "step {step} failed: boundary `{name}`: {reason}")
+            }
+            StepFailure::NonFinite { step, what, residuals } if residuals.is_empty() => {
+                write!(f, "step {step} failed: non-finite {what}")
+            }
+            StepFailure::NonFinite { step, what, residuals } => write!(
+                f,
+                "step {step} failed: non-finite {what} (residuals {})",
+                fmt_residuals(residuals)
+            ),
+        }
+    }
+}
+
+fn fmt_residuals(r: &[f64]) -> String {
+    let v: Vec<String> = r.iter().map(|x| format!("{x:.2e}")).collect();
+    format!("[{}]", v.join(", "))
+}
+
+impl std::error::Error for StepFailure {}
+
+/// What an explicit step adds to its [`StepReport`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DynamicsReport {
+    /// Time at the end of the step (s).
+    pub time: f64,
+    /// Time step (s).
+    pub dt: f64,
+    /// `W_0`: kinetic plus strain energy at `t = 0` (J per unit thickness).
+    pub initial_energy: f64,
+    /// Energy balance `W_kin + W_eps + W_p - W_ext - W_0` (J); G 5.2 charts
+    /// `W_kin + W_eps - W_0` for elastic bodies without loads.
+    pub energy_error: f64,
+    /// `sum_p m_p v_p` after the step (kg m/s per unit thickness).
+    pub momentum: P2,
+    /// Kinetic energy of the grid velocities at the end of the step with
+    /// the mass used, `v_{n+1}.M v_{n+1} / 2` (J): the grid's view of
+    /// [`Energy::kinetic`], which is measured on the points.
+    pub kinetic_grid: f64,
+    /// Largest grid speed `|v_{n+1}|` of the step (m/s).
+    pub max_speed: f64,
+    pub mass: MassKind,
+    pub stress_update: StressUpdate,
+    pub velocity_update: VelocityUpdate,
+    /// Whether the mass pattern and its symbolic factorisation were reused
+    /// from the previous step.
+    pub pattern_reused: bool,
+    /// Mass conditioning and CFL numbers, every `condition_every` steps.
+    pub conditioning: Option<Conditioning>,
+}
+
+/// Condition numbers of the three mass matrices at one configuration, and
+/// the CFL numbers `C = 1 / (h sqrt(lambda_max(K, M)))` (s/m; G 3.5) with
+/// each. A matrix that is not numerically positive definite has condition
+/// `inf` and CFL number 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Conditioning {
+    /// `M` (G (9)), reduced to the free dofs.
+    pub mass_consistent: Condition,
+    /// `M + gamma_M J_G` (G (20)).
+    pub mass_stabilised: Condition,
+    /// `diag(sum_p m_p S_vp)`: exact (largest over smallest entry).
+    pub mass_lumped: Condition,
+    /// With `K` (the material tangent) and `M`; `None` when `K = 0`.
+    pub cfl_consistent: Option<f64>,
+    /// With `K + gamma_K J_G` and `M + gamma_M J_G`.
+    pub cfl_stabilised: Option<f64>,
+    /// With `K` and the lumped mass.
+    pub cfl_lumped: Option<f64>,
+    /// The reduced material tangent `K` and `K + gamma_K J_G` (on demand
+    /// only, [`crate::Simulation::conditioning`]; singular without supports).
+    pub stiffness: Option<Condition>,
+    pub stiffness_stabilised: Option<Condition>,
+}

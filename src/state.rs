@@ -1,0 +1,417 @@
+//! The simulation's data: a model, its evolving state and the settings
+//! that may change between steps; what every driver reads and commits to.
+//! The drivers ([`crate::linear`], [`crate::newton`], [`crate::dynamics`])
+//! are functions over it; [`crate::simulation`] dispatches a step to them.
+
+use crate::assembly::{Dof, Mapping};
+use crate::boundary::{self, bspline::BSpline, BoundaryReport};
+use crate::geometry::P2;
+use crate::ghost;
+use crate::model::Model;
+use crate::points::Points;
+pub use crate::report::{Energy, Progress, ProgressHook, StepFailure, StepReport, Timings};
+use crate::scene::ConditionMode;
+
+/// Settings that may change between steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Params {
+    /// Largest accepted relative residual (see [`crate::scene::AnalysisSpec::tolerance`]).
+    pub tolerance: f64,
+    pub condition: ConditionMode,
+    /// Largest reduced system whose condition number is computed densely.
+    pub dense_limit: usize,
+    /// Newton iterations per step at most.
+    pub max_iterations: usize,
+    /// Ghost stiffness penalty `gamma_K` (0: off).
+    pub gamma_k: f64,
+    /// Implicit-boundary bandwidth over cell size.
+    pub delta_over_h: f64,
+    /// Ghost mass penalty `gamma_M` (kg/m^3; explicit dynamics, G (20)).
+    pub gamma_m: f64,
+}
+
+/// The evolving part of a simulation.
+#[derive(Clone, Debug)]
+pub(crate) struct State {
+    pub(crate) points: Points,
+    pub(crate) step: usize,
+    pub(crate) external_work: f64,
+    pub(crate) active_cells: Vec<usize>,
+    /// Ghost faces of the last step, as segments (for observers).
+    pub(crate) ghost_faces: Vec<(P2, P2)>,
+    /// Newton iterations over all steps so far.
+    pub(crate) iterations: usize,
+    /// Linear path: the work the stresses have done so far,
+    /// `sum_steps sum_p V_p (s0 + s1)/2 : de` with each step's starting
+    /// volumes (the stored energy of the updated small-strain model).
+    pub(crate) strain_energy: f64,
+    /// How far each moving implicit boundary has moved.
+    pub(crate) ibm_offsets: Vec<P2>,
+    /// Explicit dynamics: kinetic plus strain energy at the start (J).
+    pub(crate) initial_energy: f64,
+}
+
+/// A saved state to return to with [`Simulation::restore`].
+#[derive(Clone, Debug)]
+pub struct Snapshot(State);
+
+/// A model and its evolving state.
+pub struct Simulation {
+    pub(crate) model: Model,
+    pub(crate) params: Params,
+    pub(crate) state: State,
+    /// Explicit dynamics: the mass pattern of the last step.
+    pub(crate) mass_cache: crate::dynamics::MassCache,
+    /// The observer's progress hook (behind a mutex so steps can call it
+    /// through `&self`).
+    progress: Option<std::sync::Mutex<ProgressHook>>,
+}
+
+impl Simulation {
+    pub fn new(model: Model) -> Simulation {
+        let params = Params {
+            tolerance: model.analysis.tolerance,
+            condition: model.analysis.condition,
+            dense_limit: model.analysis.dense_limit,
+            max_iterations: model.analysis.max_iterations,
+            gamma_k: model.analysis.gamma_k,
+            delta_over_h: model.analysis.delta_over_h,
+            gamma_m: model.gamma_m(),
+        };
+        let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
+        let state = State {
+            points: model.points.clone(),
+            step: 0,
+            external_work: 0.0,
+            strain_energy: 0.0,
+            active_cells: map.active_cells,
+            ghost_faces: Vec::new(),
+            iterations: 0,
+            ibm_offsets: vec![[0.0; 2]; model.ibm.len()],
+            initial_energy: model.points.kinetic_energy(),
+        };
+        Simulation {
+            model,
+            params,
+            state,
+            mass_cache: Default::default(),
+            progress: None,
+        }
+    }
+
+    /// Parse, validate and build a scene.
+    pub fn from_scene_text(text: &str, file: &str) -> Result<Simulation, crate::scene::SceneError> {
+        Ok(Simulation::new(Model::from_text(text, file)?))
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    pub fn points(&self) -> &Points {
+        &self.state.points
+    }
+
+    /// Steps taken so far.
+    pub fn step_index(&self) -> usize {
+        self.state.step
+    }
+
+    pub fn load_steps(&self) -> usize {
+        self.model.analysis.load_steps
+    }
+
+    pub fn load_factor(&self) -> f64 {
+        self.state.step as f64 / self.load_steps() as f64
+    }
+
+    /// Cells holding points after the last step.
+    pub fn active_cells(&self) -> &[usize] {
+        &self.state.active_cells
+    }
+
+    /// Make a completed step the current state.
+    pub(crate) fn commit(
+        &mut self,
+        points: Points,
+        step: usize,
+        work: f64,
+        map: &Mapping,
+        faces: &[ghost::GhostFace],
+        iterations: usize,
+    ) {
+        self.commit_cells(points, step, work, map.active_cells.clone(), faces, iterations);
+    }
+
+    fn commit_cells(
+        &mut self,
+        points: Points,
+        step: usize,
+        work: f64,
+        active_cells: Vec<usize>,
+        faces: &[ghost::GhostFace],
+        iterations: usize,
+    ) {
+        self.state.points = points;
+        self.state.step = step;
+        self.state.external_work += work;
+        self.state.active_cells = active_cells;
+        self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
+        self.state.iterations += iterations;
+    }
+
+    /// Commit a quasi-static step and move the moving implicit boundaries
+    /// by the load factor's increment `dlambda`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn commit_quasi_static(
+        &mut self,
+        points: Points,
+        step: usize,
+        work: f64,
+        active_cells: Vec<usize>,
+        faces: &[ghost::GhostFace],
+        iterations: usize,
+        dlambda: f64,
+    ) {
+        self.commit_cells(points, step, work, active_cells, faces, iterations);
+        for (off, b) in self.state.ibm_offsets.iter_mut().zip(&self.model.ibm) {
+            if b.moves {
+                let m = b.motion();
+                off[0] += m[0] * dlambda;
+                off[1] += m[1] * dlambda;
+            }
+        }
+    }
+
+    /// Simulated time (s) after the steps taken, for explicit dynamics.
+    pub fn time(&self) -> Option<f64> {
+        let a = &self.model.analysis;
+        (a.kind == crate::scene::AnalysisKind::ExplicitDynamics)
+            .then(|| self.state.step as f64 * a.duration.unwrap_or(0.0) / a.load_steps as f64)
+    }
+
+    /// The finite-strain material of point `p`'s body.
+    pub(crate) fn hencky(&self, p: usize) -> crate::material::hencky::Hencky {
+        self.material_of(p).hencky()
+    }
+
+    /// The material of point `p`'s body.
+    pub fn material_of(&self, p: usize) -> &crate::material::Material {
+        &self.model.materials[self.model.bodies[self.state.points.body[p]].material]
+    }
+
+    /// The implicit boundaries where they are now (moving ones displaced,
+    /// those following a B-spline boundary on its curve through the points'
+    /// positions now), for observers: a boundary whose spline cannot be
+    /// built now is left out (the next step that needs it fails and says
+    /// why, [`StepFailure::Boundary`]).
+    pub fn ibm_boundaries(&self) -> Vec<crate::ibm::IbmBoundary> {
+        self.model
+            .ibm
+            .iter()
+            .zip(&self.state.ibm_offsets)
+            .filter_map(|(b, &d)| self.ibm_boundary_now(b, d).ok())
+            .collect()
+    }
+
+    fn ibm_boundary_now(&self, b: &crate::ibm::IbmBoundary, offset: P2) -> Result<crate::ibm::IbmBoundary, String> {
+        match b.spline {
+            Some((idx, chords)) => {
+                let s = self.model.boundaries[idx]
+                    .spline(&self.state.points)
+                    .map_err(|e| e.to_string())?;
+                Ok(crate::ibm::IbmBoundary {
+                    points: s.sample(chords),
+                    ..b.clone()
+                })
+            }
+            None => Ok(b.translated(offset)),
+        }
+    }
+
+    /// The implicit boundaries for step `step`; a tracked boundary whose
+    /// spline cannot be built is the step's failure (never the old curve).
+    pub(crate) fn ibm_boundaries_now(&self, step: usize) -> Result<Vec<crate::ibm::IbmBoundary>, StepFailure> {
+        self.model
+            .ibm
+            .iter()
+            .zip(&self.state.ibm_offsets)
+            .map(|(b, &d)| {
+                self.ibm_boundary_now(b, d).map_err(|reason| StepFailure::Boundary {
+                    step,
+                    name: b.name.clone(),
+                    reason,
+                })
+            })
+            .collect()
+    }
+
+    /// Ghost faces of the last step (empty without ghost stabilisation).
+    pub fn ghost_faces(&self) -> &[(P2, P2)] {
+        &self.state.ghost_faces
+    }
+
+    pub fn finished(&self) -> bool {
+        self.state.step >= self.load_steps()
+    }
+
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Change settings; they apply from the next step.
+    pub fn set_params(&mut self, params: Params) {
+        self.params = params;
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot(self.state.clone())
+    }
+
+    pub fn restore(&mut self, snapshot: &Snapshot) {
+        self.state = snapshot.0.clone();
+    }
+
+    /// Watch steps as they compute: `hook` gets every residual and may
+    /// cancel the step by returning `false` ([`StepFailure::Cancelled`]).
+    pub fn set_progress(&mut self, hook: Option<ProgressHook>) {
+        self.progress = hook.map(std::sync::Mutex::new);
+    }
+
+    /// Tell the hook; `false` when the observer cancels the step.
+    pub(crate) fn report_progress(&self, step: usize, iteration: usize, residual: f64) -> bool {
+        match &self.progress {
+            Some(m) => match m.lock() {
+                Ok(mut hook) => hook(&Progress {
+                    step,
+                    iteration,
+                    residual,
+                }),
+                Err(_) => true,
+            },
+            None => true,
+        }
+    }
+
+    /// The splines of all boundaries through the points' current positions.
+    pub fn boundary_splines(&self) -> Vec<(String, Option<BSpline>)> {
+        self.model
+            .boundaries
+            .iter()
+            .map(|b| (b.name.clone(), b.spline(&self.state.points).ok()))
+            .collect()
+    }
+
+    /// External force per unit load factor (body forces, point loads,
+    /// boundary tractions on the current curves) and internal force of the
+    /// current stresses, on the free dofs, and the internal force on the
+    /// prescribed ones; with a report per boundary.
+    pub(crate) fn nodal_forces(
+        &self,
+        map: &Mapping,
+        step: usize,
+        lambda: f64,
+    ) -> Result<(Forces, Vec<BoundaryReport>), StepFailure> {
+        let mut f = self.dead_forces(map);
+        let pts = &self.state.points;
+        let active = |n: usize| map.dofs.node_dof[n][0] != Dof::Inactive;
+        let mut reports = Vec::with_capacity(self.model.boundaries.len());
+        for b in &self.model.boundaries {
+            let spline = b.spline(pts).map_err(|e| StepFailure::Boundary {
+                step,
+                name: b.name.clone(),
+                reason: e.to_string(),
+            })?;
+            let (forces, report) =
+                boundary::traction_forces(b, &spline, &self.model.grid, self.model.exact.as_ref(), &active, lambda);
+            for (n, force) in forces {
+                for c in 0..2 {
+                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                        f.ext[i] += force[c];
+                    }
+                }
+            }
+            reports.push(report);
+        }
+        Ok((f, reports))
+    }
+
+    /// External force per unit load factor of body forces and point loads,
+    /// and the internal force of the current stresses (free and prescribed
+    /// dofs).
+    pub(crate) fn dead_forces(&self, map: &Mapping) -> Forces {
+        let pts = &self.state.points;
+        let mut f = Forces {
+            ext: vec![0.0; map.dofs.n_free],
+            int: vec![0.0; map.dofs.n_free],
+            int_fixed: vec![0.0; map.dofs.constrained.len()],
+        };
+        let g = self.model.gravity;
+        for p in 0..pts.len() {
+            if pts.vol[p] == 0.0 {
+                continue;
+            }
+            let s = pts.stress[p];
+            let v = pts.vol[p];
+            for (n, w, [dx, dy]) in map.stencils[p].iter() {
+                let fi = [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v];
+                let fe = [w * pts.mass[p] * g[0], w * pts.mass[p] * g[1]];
+                for c in 0..2 {
+                    match map.dofs.node_dof[n][c] {
+                        Dof::Free(i) => {
+                            f.ext[i] += fe[c];
+                            f.int[i] += fi[c];
+                        }
+                        Dof::Fixed(i) => f.int_fixed[i] += fi[c],
+                        Dof::Inactive => {}
+                    }
+                }
+            }
+        }
+        for load in &self.model.point_loads {
+            for (n, w, _) in map.stencils[load.point].iter() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                        f.ext[i] += w * load.force[c];
+                    }
+                }
+            }
+        }
+        f
+    }
+}
+
+pub(crate) struct Forces {
+    /// External force per unit load factor on the free dofs.
+    pub(crate) ext: Vec<f64>,
+    /// Internal force of the current stresses on the free dofs.
+    pub(crate) int: Vec<f64>,
+    /// Internal force on the prescribed dofs.
+    pub(crate) int_fixed: Vec<f64>,
+}
+
+/// A step's updated points must be finite and inside the grid before they
+/// are committed.
+pub(crate) fn check_points(
+    grid: &crate::grid::Grid,
+    pts: &Points,
+    step: usize,
+    residuals: &[f64],
+) -> Result<(), StepFailure> {
+    if let Some(p) = (0..pts.len()).find(|&p| !pts.stress[p].iter().chain(&pts.x[p]).all(|v| v.is_finite())) {
+        return Err(StepFailure::NonFinite {
+            step,
+            what: format!("stress or position at point {p}"),
+            residuals: residuals.to_vec(),
+        });
+    }
+    if let Some(p) = (0..pts.len()).find(|&p| grid.cell_of(pts.x[p]).is_none()) {
+        return Err(StepFailure::LeftGrid {
+            step,
+            point: p,
+            position: pts.x[p],
+            domain: false,
+        });
+    }
+    Ok(())
+}
