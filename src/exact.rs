@@ -42,6 +42,20 @@ pub enum ExactSolution {
         about: P2,
         material: LinearElastic,
     },
+    /// Confined compression under finite deformation (Hencky elasticity):
+    /// the block's frame stretched by `s(lambda) = 1 + lambda (stretch - 1)`
+    /// along y' with x' and z held: logarithmic strain `e = ln s` along y',
+    /// Kirchhoff `tau_y'y' = M e`, `tau_x'x' = tau_zz = lambda_L e` (Lame's
+    /// `lambda_L`), Cauchy `s = tau / J` with `J = s`;
+    /// `u_y' = (s - 1)(Y' - base)`. Not linear in the load: use
+    /// [`ExactSolution::fields`].
+    ConfinedFinite {
+        stretch: f64,
+        base: f64,
+        angle: f64,
+        about: P2,
+        material: LinearElastic,
+    },
     /// Lame's thick cylinder under internal pressure `p`:
     /// `s_rr = A - B/r^2`, `s_tt = A + B/r^2`, `A = p a^2/(b^2 - a^2)`,
     /// `B = p a^2 b^2/(b^2 - a^2)`; plane strain
@@ -116,6 +130,7 @@ impl ExactSolution {
             ExactSolution::ColumnSelfWeight { .. } => "column-self-weight",
             ExactSolution::UniaxialY { .. } => "uniaxial-y",
             ExactSolution::ConfinedY { .. } => "confined-y",
+            ExactSolution::ConfinedFinite { .. } => "confined-y-finite",
             ExactSolution::ColumnFinite { .. } => "column-finite",
             ExactSolution::Lame { .. } => "lame",
             ExactSolution::Kirsch { .. } => "kirsch",
@@ -124,9 +139,40 @@ impl ExactSolution {
         }
     }
 
-    /// Exact Cauchy stress `[xx, yy, xy]` (Pa) at reference position `x`.
+    /// Exact Cauchy stress `[xx, yy, xy]` (Pa) and displacement (m) at
+    /// reference position `x` and load factor `load_factor`.
+    pub fn fields(&self, x: P2, load_factor: f64) -> ([f64; 3], P2) {
+        match self {
+            ExactSolution::ConfinedFinite {
+                stretch,
+                base,
+                angle,
+                about,
+                material: m,
+            } => {
+                let s = 1.0 + load_factor * (stretch - 1.0);
+                let e = s.ln();
+                let lame = m.e * m.nu / ((1.0 + m.nu) * (1.0 - 2.0 * m.nu));
+                let (sx, sy) = (lame * e / s, constrained_modulus(m) * e / s);
+                let (sn, c) = angle.sin_cos();
+                let stress = [c * c * sx + sn * sn * sy, sn * sn * sx + c * c * sy, c * sn * (sx - sy)];
+                let (dx, dy) = (x[0] - about[0], x[1] - about[1]);
+                let yp = about[1] + (-sn * dx + c * dy);
+                let u = (s - 1.0) * (yp - base);
+                (stress, [-sn * u, c * u])
+            }
+            _ => (
+                self.stress(x).map(|v| v * load_factor),
+                self.displacement(x).map(|v| v * load_factor),
+            ),
+        }
+    }
+
+    /// Exact Cauchy stress `[xx, yy, xy]` (Pa) at reference position `x`
+    /// (at load factor 1).
     pub fn stress(&self, x: P2) -> [f64; 3] {
         match self {
+            ExactSolution::ConfinedFinite { .. } => self.fields(x, 1.0).0,
             ExactSolution::ColumnSelfWeight {
                 rho_g, top, material, ..
             } => {
@@ -185,9 +231,10 @@ impl ExactSolution {
         }
     }
 
-    /// Exact displacement (m) at reference position `x`.
+    /// Exact displacement (m) at reference position `x` (at load factor 1).
     pub fn displacement(&self, x: P2) -> P2 {
         match self {
+            ExactSolution::ConfinedFinite { .. } => self.fields(x, 1.0).1,
             ExactSolution::ColumnFinite { .. } => [f64::NAN, f64::NAN],
             ExactSolution::SimpleShear { g, x0, .. } => [0.0, g * (x[0] - x0)],
             // The first body's field at load factor 1 (errors use each point's own body).
@@ -261,8 +308,8 @@ impl ExactSolution {
         }
     }
 
-    /// Error norms of the points' state against this solution, scaled by
-    /// `load_factor` (the solutions are linear in the load).
+    /// Error norms of the points' state against this solution at
+    /// `load_factor` ([`ExactSolution::fields`]).
     ///
     /// - `stress_l2`: `sqrt(sum_p V_p |s_p - s(X_p)|^2 / sum_p V_p |s(X_p)|^2)`
     ///   (Frobenius norm of the in-plane stress; C (30) in L2 form);
@@ -306,8 +353,7 @@ impl ExactSolution {
             if v == 0.0 {
                 continue;
             }
-            let se = self.stress(pts.x0[p]).map(|s| s * load_factor);
-            let ue = self.displacement(pts.x0[p]).map(|u| u * load_factor);
+            let (se, ue) = self.fields(pts.x0[p], load_factor);
             let s = pts.stress[p];
             let u = pts.displacement(p);
             let frob = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + 2.0 * a[2] * a[2];
@@ -321,8 +367,8 @@ impl ExactSolution {
         // B (37)-(40): volume-weighted means of per-point relative errors.
         let (mut bs, mut bu, mut bv) = (0.0, 0.0, 0.0);
         for p in (0..pts.len()).filter(|&p| pts.vol0[p] > 0.0) {
-            let se = self.stress(pts.x0[p])[1] * load_factor;
-            let ue = self.displacement(pts.x0[p]).map(|u| u * load_factor);
+            let (se, ue) = self.fields(pts.x0[p], load_factor);
+            let se = se[1];
             let u = pts.displacement(p);
             let v = pts.vol0[p];
             if se != 0.0 {
@@ -353,6 +399,22 @@ impl ExactSolution {
             name: "displacement_mean_relative",
             value: bu / bv,
         });
+        if let ExactSolution::ConfinedFinite { .. } = self {
+            // The largest per-point relative stress error (Frobenius).
+            let frob = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + 2.0 * a[2] * a[2]).sqrt();
+            let worst = (0..pts.len())
+                .filter(|&p| pts.vol0[p] > 0.0)
+                .map(|p| {
+                    let se = self.fields(pts.x0[p], load_factor).0;
+                    let s = pts.stress[p];
+                    frob([s[0] - se[0], s[1] - se[1], s[2] - se[2]]) / frob(se)
+                })
+                .fold(0.0, f64::max);
+            out.push(ErrorNorm {
+                name: "stress_max_relative",
+                value: worst,
+            });
+        }
         if let ExactSolution::ColumnSelfWeight { rho_g, base, top, .. } = self {
             out.push(ErrorNorm {
                 name: "syy_normalised",

@@ -662,3 +662,191 @@ fn straight_channel_rollers_let_the_block_slide() {
         );
     }
 }
+
+/// Run a confined-compression block under finite deformation; per step the
+/// largest relative stress error at any point and the platen's reaction
+/// along its inward normal against the exact one (`angle`: the block's
+/// frame, degrees).
+fn finite_block(sim: &mut mpmlab::Simulation, angle: f64) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    while !sim.finished() {
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        assert!(r.iterations <= 6, "step {}: {:?}", r.step, r.residuals);
+        let platen = r.ibm.iter().find(|b| b.name == "platen").unwrap();
+        // The platen holds the whole load: its reaction on the body along
+        // its inward normal (-y' = (sin a, -cos a)) is |s_y'y'| times the
+        // block's width (100 mm, held by the side rollers), per unit
+        // thickness. (Its corner cells also hold side-roller nodes, whose
+        // reactions are along x' and drop out of this component.)
+        let s = 1.0 - 0.01 * r.step as f64;
+        let m = 1000.0 * 0.7 / (1.3 * 0.4);
+        let expected = m * s.ln().abs() / s * 100.0;
+        let (sn, c) = angle.to_radians().sin_cos();
+        let got = platen.reaction[0] * sn - platen.reaction[1] * c;
+        println!(
+            "step {}: stress_max_relative {:.2e}, stress_l2 {:.2e}, displacement_l2 {:.2e}, reaction {:.3e}, iterations {}",
+            r.step,
+            error(&r, "stress_max_relative"),
+            error(&r, "stress_l2"),
+            error(&r, "displacement_l2"),
+            got / expected - 1.0,
+            r.iterations
+        );
+        out.push((error(&r, "stress_max_relative"), got / expected - 1.0));
+    }
+    out
+}
+
+#[test]
+fn block_roller_finite_is_hencky_exact() {
+    // Confined compression by 10% in 10 steps, every side on an implicit
+    // roller, the top a moving platen, updated Lagrangian Newton. The exact
+    // field is linear (uniform stretch 0.9), which the grid's functions
+    // reproduce; where the GIMP domains tile the block the points also
+    // integrate the boundary forces of a uniform stress exactly at every
+    // configuration, so what remains is the band (0.24 delta/h along
+    // boundaries with normal strain, ~2e-7 at delta = 1e-6 h) and the GIMP
+    // domains' corners at the rollers (measured 1.7e-4 at most). Bound: the
+    // issue's 1e-3 at every point, in stress and in the platen's reaction.
+    let mut sim = sim_with("block-roller-finite-aligned", |_| {});
+    for (k, (e, reaction)) in finite_block(&mut sim, 0.0).into_iter().enumerate() {
+        assert!(e < 1e-3, "step {}: {e:e}", k + 1);
+        assert!(reaction.abs() < 1e-3, "step {}: reaction off by {reaction:e}", k + 1);
+    }
+}
+
+#[test]
+fn block_roller_finite_at_30_degrees() {
+    // C 5.1's block at 30 deg under finite deformation. The first step
+    // (1% compression) with the standard basis is C's test on the start
+    // configuration: exact but for the band (0.24 delta/h) and Newton's
+    // tolerance, measured 6.9e-7 at every point; bound 1e-5. The same step
+    // with GIMP carries the domains' overhang past the rotated edges (4.4e-3
+    // stress_l2 even in a linear 0.1% step), and later steps of either
+    // basis the quadrature error of sub-cells that cross grid lines: the
+    // shipped GIMP scene must still converge through all 10 steps.
+    let mut sim = sim_with("block-roller-finite", |s| {
+        s.bodies[0].basis = mpmlab::basis::BasisKind::Standard;
+        s.analysis.load_steps = 1;
+        s.ibm[3].normal_displacement = Some(1.0);
+        if let Some(mpmlab::scene::ExactSpec::ConfinedYFinite { stretch, .. }) = s.exact.as_mut() {
+            *stretch = 0.99;
+        }
+    });
+    let first = finite_block(&mut sim, 30.0);
+    assert!(first[0].0 < 1e-5, "{first:?}");
+    assert!(first[0].1.abs() < 1e-5, "{first:?}");
+    let mut sim = sim_with("block-roller-finite", |_| {});
+    finite_block(&mut sim, 30.0);
+}
+
+#[test]
+fn two_materials_on_one_roller_keep_their_own_stresses() {
+    // Two blocks of E = 1000 and 3000 MPa (same nu) side by side at 30 deg
+    // on one implicit roller, pressed 1 mm by a platen: uniaxial stress in
+    // the blocks' frame, s_y'y' = E/(1 - nu^2) * (-0.01) in each, s_x'x' =
+    // s_x'y' = 0. The displacement is one linear field (same strain in
+    // both), so the points are exact but for the band: 0.24 delta/h along
+    // the base (2.4e-7 here) and the cut cells the interface crosses, where
+    // one bilinear field spans both materials. At delta = 1e-6 h the band
+    // acts almost as a pure constraint and its material matters little:
+    // measured 3.8e-6 (linear) and 4.0e-6 (finite) of the stiff stress with
+    // each band point taking its nearest point's material, 9.3e-6 and
+    // 9.5e-6 with one material for the whole band (what the engine did
+    // before). The bound 5e-6 lies between.
+    for kind in ["quasi-static-linear", "quasi-static-finite"] {
+        let mut sim = sim_with("two-materials-roller", |s| {
+            if kind == "quasi-static-finite" {
+                s.analysis.kind = mpmlab::scene::AnalysisKind::QuasiStaticFinite;
+                // The residual's round-off floor here is ~1e-10 (cond ~1e12).
+                s.analysis.tolerance = 1e-8;
+            }
+        });
+        run_all(&mut sim);
+        let stresses = block_frame_stress(&sim, 30.0);
+        let nu: f64 = 0.3;
+        let strain: f64 = -0.01;
+        let finite = kind == "quasi-static-finite";
+        let mut worst = 0.0f64;
+        for (p, s) in stresses.iter().enumerate() {
+            if sim.points().vol0[p] == 0.0 {
+                continue;
+            }
+            let e = [1000.0, 3000.0][sim.points().body[p]];
+            let syy = if finite {
+                // Hencky, plane strain, x' free: e_x' = -nu/(1-nu) e_y',
+                // tau_y'y' = E/(1-nu^2) e_y' with e_y' = ln 0.99, and
+                // J = exp(e_x' + e_y').
+                let ey = (1.0 + strain).ln();
+                let ex = -nu / (1.0 - nu) * ey;
+                e / (1.0 - nu * nu) * ey / (ex + ey).exp()
+            } else {
+                e / (1.0 - nu * nu) * strain
+            };
+            let err = (s[1] - syy).abs().max(s[0].abs()).max(s[2].abs());
+            worst = worst.max(err / 32.967);
+        }
+        println!("{kind}: largest stress error / stiff stress {worst:.2e}");
+        assert!(worst < 5e-6, "{kind}: {worst:e}");
+    }
+}
+
+/// Transverse tip displacement (beam frame) after each step of the finite
+/// cantilever clamped by IBM at `angle`, or on the grid line x = 0.
+fn finite_cantilever_curve(angle: u32, h: f64, grid_clamp: bool) -> Vec<f64> {
+    let mut sim = sim_with(&format!("slender-cantilever-finite-{angle}"), |s| {
+        s.grid.h = h;
+        s.analysis.condition = mpmlab::scene::ConditionMode::Off;
+        if grid_clamp {
+            s.ibm.clear();
+            s.dirichlet.push(mpmlab::scene::DirichletSpec {
+                kind: mpmlab::scene::DirichletKind::Fixed,
+                x: Some(0.0),
+                y: None,
+                node: None,
+                displacement: None,
+                normal_displacement: None,
+            });
+        }
+    });
+    let (sn, c) = (angle as f64).to_radians().sin_cos();
+    let mut curve = Vec::new();
+    while !sim.finished() {
+        sim.step().unwrap_or_else(|f| panic!("{angle} deg, h {h}: {f}"));
+        let tip = sim.model().boundaries[0].points[1];
+        let u = sim.points().displacement(tip);
+        curve.push(-sn * u[0] + c * u[1]);
+    }
+    curve
+}
+
+#[test]
+fn slender_cantilever_finite_clamps_agree() {
+    // C 5.4's cantilever under finite deformation (tip deflection ~7% of
+    // its length): the IBM clamp at 0 deg against the grid-line clamp (the
+    // same beam, the clamp enforced two ways: they differ by the band's
+    // O(delta/h) with delta = 1e-6 h and Newton's tolerance 1e-6, measured
+    // 3e-7; bound 1e-5), and at 45 deg against 0 deg (other cuts of the
+    // same beam, the partly filled cells of C 5.4; measured 0.6%), within
+    // 1% at every step.
+    let ibm0 = finite_cantilever_curve(0, 2.0, false);
+    let grid0 = finite_cantilever_curve(0, 2.0, true);
+    let ibm45 = finite_cantilever_curve(45, 2.0, false);
+    println!("IBM 0 deg {ibm0:?}\ngrid 0 deg {grid0:?}\nIBM 45 deg {ibm45:?}");
+    for k in 0..ibm0.len() {
+        assert!(
+            (ibm0[k] / grid0[k] - 1.0).abs() < 1e-5,
+            "step {}: {} vs {}",
+            k + 1,
+            ibm0[k],
+            grid0[k]
+        );
+        assert!(
+            (ibm45[k] / ibm0[k] - 1.0).abs() < 0.01,
+            "step {}: {} vs {}",
+            k + 1,
+            ibm45[k],
+            ibm0[k]
+        );
+    }
+}

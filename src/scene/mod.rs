@@ -531,6 +531,17 @@ pub enum ExactSpec {
         #[serde(default)]
         about: [f64; 2],
     },
+    /// Confined compression under finite deformation (Hencky): the block's
+    /// frame stretched to `stretch` along y' at load factor 1 (linearly in
+    /// the load factor), x' held; `u_y' = 0` on `y' = base`.
+    ConfinedYFinite {
+        stretch: f64,
+        base: f64,
+        #[serde(default)]
+        angle_deg: f64,
+        #[serde(default)]
+        about: [f64; 2],
+    },
     /// Thick cylinder (Lame) under internal pressure `pressure` (Pa) between
     /// radii `r_inner` and `r_outer` about `center`.
     Lame {
