@@ -5,8 +5,9 @@
 //!   of one face and of a 2x2 patch (sMPM and GIMP), and its `h^2` scaling;
 //! - G (24) and 3.3: the stabilised mass `M + gamma_M J_G` with the default
 //!   `gamma_M = rho/4`, through the momentum it maps to grid velocities;
-//! - C (16): the Dirichlet function `d(phi)` and its derivative, and the
-//!   band's stiffness on a one-cell 1D problem against its closed form;
+//! - C (16): the Dirichlet function `d(phi)` and its derivative; the band's
+//!   own integral (C (18)-(21)) at delta/h = 0.1, 0.25, 0.5 and the stiffness
+//!   of a one-cell 1D problem solved by the engine, against closed forms;
 //! - B (13)-(17): B-spline traction weights on a straight and a circular
 //!   boundary against exact line integrals;
 //! - the Hencky / von Mises return map against closed-form pure shear and
@@ -466,6 +467,78 @@ tolerance = 1e-12
         assert!((u[1] - u_want).abs() < 1e-12 * u_want.abs(), "r {r}: {} vs {u_want}", u[1]);
         assert!((syy - s_want).abs() < 1e-12 * s_want.abs(), "r {r}: {syy} vs {s_want}");
         assert!(u[0].abs() < 1e-15 && pts.stress[0][0].abs() < 1e-9 * s_want.abs());
+    }
+}
+
+#[test]
+fn band_integral_is_c18_for_any_width() {
+    // The band's own integral, without points: its Gauss points (along and
+    // 3 across) with B_bar = B1 + B2 of C (19)-(21), summed as
+    // int_band B_bar^T C B_bar, for the base y = 0 of one cell [0, h]^2,
+    // against the band part of the closed form above (t = y/delta,
+    // r = delta/h, symmetric mode u_y = d_0 below, d_1 above, u_x = 0):
+    //   E [[4/(3r) - 5/3 + 17r/15, 5/6 - 17r/15], [., 17r/15]].
+    // Here delta/h = 0.5 is open to the test (no point is involved).
+    use mpmlab::ibm::{b_bar, d_total, grid_stencil, IbmBoundary};
+    use mpmlab::scene::DirichletKind;
+    let (h, e) = (2.0, 1.0e6);
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h,
+        nx: 1,
+        ny: 1,
+    };
+    let base = IbmBoundary {
+        name: "base".into(),
+        kind: DirichletKind::Fixed,
+        points: vec![[0.0, 0.0], [h, 0.0]],
+        side: 1.0,
+        value: [0.0, 0.0],
+        gauss_points: 2,
+        exact_field: false,
+        fit_regularisation: 0.0,
+        moves: false,
+        spline: None,
+    };
+    // Plane strain, nu = 0: C = diag(E, E, E/2); only e_yy enters here.
+    for r in [0.1, 0.25, 0.5] {
+        let delta = r * h;
+        let mut k = [[0.0; 2]; 2];
+        let mut area = 0.0;
+        for (x, w) in base.band_points(&grid, delta) {
+            area += w;
+            let st = grid_stencil(&grid, x);
+            let (d, g) = d_total(std::slice::from_ref(&base), x, delta);
+            let ops = b_bar(&st, &d, &g);
+            // e_yy of the mode's two shapes: row 1 (yy), column 1 (u_y).
+            let mut eyy = [0.0; 2];
+            for (node, (b1, b2)) in st.nodes[..st.len].iter().zip(&ops) {
+                let row = node / 2; // 0: base nodes, 1: top nodes (2 per row)
+                eyy[row] += b1[1][1] + b2[1][1];
+            }
+            for a in 0..2 {
+                for b in 0..2 {
+                    k[a][b] += w * e * eyy[a] * eyy[b];
+                }
+            }
+        }
+        assert!((area - delta * h).abs() < 1e-14 * delta * h, "band area {area}");
+        let want = [
+            [4.0 / (3.0 * r) - 5.0 / 3.0 + 17.0 * r / 15.0, 5.0 / 6.0 - 17.0 * r / 15.0],
+            [5.0 / 6.0 - 17.0 * r / 15.0, 17.0 * r / 15.0],
+        ];
+        for a in 0..2 {
+            for b in 0..2 {
+                // Exact quadrature (degree 4 across, 2 along): round-off of
+                // the largest entry, E 4/(3r).
+                assert!(
+                    (k[a][b] - e * want[a][b]).abs() < 1e-13 * e / r,
+                    "delta/h {r}: K[{a}][{b}] = {} vs {}",
+                    k[a][b],
+                    e * want[a][b]
+                );
+            }
+        }
     }
 }
 
