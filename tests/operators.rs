@@ -363,7 +363,10 @@ fn dirichlet_function_is_c16() {
                 (2.0 * t - t * t, 2.0 * (1.0 - t) / delta)
             };
             // Exact up to the rounding of phi/delta.
-            assert!((d - want).abs() < 1e-15, "delta {delta}, phi/delta {t}: d {d} vs {want}");
+            assert!(
+                (d - want).abs() < 1e-15,
+                "delta {delta}, phi/delta {t}: d {d} vs {want}"
+            );
             assert!(
                 (dd - dwant).abs() < 1e-14 / delta,
                 "delta {delta}, phi/delta {t}: d' {dd} vs {dwant}"
@@ -461,10 +464,17 @@ tolerance = 1e-12
         let u = pts.displacement(0);
         let syy = pts.stress[0][1];
         let (u_want, s_want) = (0.5 * (d0 + d1), e * (d1 - d0) / h);
-        println!("delta/h {r}: u_y {:.12e} (closed form {u_want:.12e}), s_yy {syy:.12e} ({s_want:.12e})", u[1]);
+        println!(
+            "delta/h {r}: u_y {:.12e} (closed form {u_want:.12e}), s_yy {syy:.12e} ({s_want:.12e})",
+            u[1]
+        );
         // A 4-dof solve with cond ~1e2 and exact band quadrature (3 Gauss
         // points across integrate the degree-4 integrand exactly): round-off.
-        assert!((u[1] - u_want).abs() < 1e-12 * u_want.abs(), "r {r}: {} vs {u_want}", u[1]);
+        assert!(
+            (u[1] - u_want).abs() < 1e-12 * u_want.abs(),
+            "r {r}: {} vs {u_want}",
+            u[1]
+        );
         assert!((syy - s_want).abs() < 1e-12 * s_want.abs(), "r {r}: {syy} vs {s_want}");
         assert!(u[0].abs() < 1e-15 && pts.stress[0][0].abs() < 1e-9 * s_want.abs());
     }
@@ -524,7 +534,10 @@ fn band_integral_is_c18_for_any_width() {
         }
         assert!((area - delta * h).abs() < 1e-14 * delta * h, "band area {area}");
         let want = [
-            [4.0 / (3.0 * r) - 5.0 / 3.0 + 17.0 * r / 15.0, 5.0 / 6.0 - 17.0 * r / 15.0],
+            [
+                4.0 / (3.0 * r) - 5.0 / 3.0 + 17.0 * r / 15.0,
+                5.0 / 6.0 - 17.0 * r / 15.0,
+            ],
             [5.0 / 6.0 - 17.0 * r / 15.0, 17.0 * r / 15.0],
         ];
         for a in 0..2 {
@@ -605,7 +618,7 @@ fn straight_boundary_traction_is_the_exact_line_integral() {
     let (forces, report) = traction_forces(&boundary, &spline, &grid, None, &|_| true, 1.0);
     let got = summed(&forces, grid.num_nodes());
     // Crossings: x = 1 at t = 0.7/2.4, x = 2 at 1.7/2.4, y = 1 at 0.8/1.2.
-    let mut breaks = vec![0.0, 0.7 / 2.4, 1.7 / 2.4, 0.8 / 1.2, 1.0];
+    let mut breaks = [0.0, 0.7 / 2.4, 1.7 / 2.4, 0.8 / 1.2, 1.0];
     breaks.sort_by(f64::total_cmp);
     let len = (2.4f64).hypot(1.2);
     for n in 0..grid.num_nodes() {
@@ -656,7 +669,14 @@ fn circle_forces(grid: &Grid, c: [f64; 2], rad: f64, k: usize, p: f64) -> (Vec<[
             let v = (grid.origin[d] + line as f64 * grid.h - c[d]) / rad;
             if v.abs() < 1.0 {
                 let base = if d == 0 { v.acos() } else { v.asin() };
-                for th in [base, if d == 0 { TAU - base } else { std::f64::consts::PI - base }] {
+                for th in [
+                    base,
+                    if d == 0 {
+                        TAU - base
+                    } else {
+                        std::f64::consts::PI - base
+                    },
+                ] {
                     breaks.push(th.rem_euclid(TAU));
                 }
             }
@@ -753,7 +773,11 @@ fn return_map_matches_closed_form_pure_shear_and_uniaxial_strain() {
     // Round-off of logs and an eigen-decomposition: 1e-12 of the stress.
     let tol = 1e-12 * rho_tr;
     assert!(!r.yielding && r.dissipation == 0.0);
-    assert!(close3(&r.tau, &diag3(2.0 * mu * ln, -2.0 * mu * ln, 0.0), tol), "{}", r.tau);
+    assert!(
+        close3(&r.tau, &diag3(2.0 * mu * ln, -2.0 * mu * ln, 0.0), tol),
+        "{}",
+        r.tau
+    );
     assert!(close3(&r.b_e, &diag3(lam * lam, 1.0 / (lam * lam), 1.0), 1e-14));
     // P = tau dF^-T.
     assert!((r.p[(0, 0)] - 2.0 * mu * ln / lam).abs() < tol && (r.p[(1, 1)] + 2.0 * mu * ln * lam).abs() < tol);
@@ -771,9 +795,17 @@ fn return_map_matches_closed_form_pure_shear_and_uniaxial_strain() {
     let ee = ry / (2.0 * s2 * mu);
     assert!(r.yielding);
     assert!(close3(&r.tau, &diag3(ry / s2, -ry / s2, 0.0), tol), "{}", r.tau);
-    assert!(close3(&r.b_e, &diag3((2.0 * ee).exp(), (-2.0 * ee).exp(), 1.0), 1e-14), "{}", r.b_e);
+    assert!(
+        close3(&r.b_e, &diag3((2.0 * ee).exp(), (-2.0 * ee).exp(), 1.0), 1e-14),
+        "{}",
+        r.b_e
+    );
     let diss = s2 * ry * ln - ry * ry / (2.0 * mu);
-    assert!((r.dissipation - diss).abs() < 1e-10 * diss, "{} vs {diss}", r.dissipation);
+    assert!(
+        (r.dissipation - diss).abs() < 1e-10 * diss,
+        "{} vs {diss}",
+        r.dissipation
+    );
     // A second increment of the same shear from the returned state stays on
     // the surface (perfect plasticity): the same stress.
     let r2 = plastic.respond(&f, &r.b_e);
