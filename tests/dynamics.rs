@@ -240,11 +240,16 @@ fn elastic_collision_energy_error() {
         "USF stabilised: {e1:.4e} (1000 steps), {e2:.4e} (2000 steps), ratio {:.3}",
         e2 / e1
     );
-    // The paper's level within a factor 3 (our ghost outline and point
-    // lattice are not G's VTK files).
-    assert!(e1 > 0.888e-3 / 3.0 && e1 < 0.888e-3 * 3.0, "{e1:e}");
-    // Halving the time step halves the error (G: ratio 0.501).
-    assert!((e2 / e1 - 0.5).abs() < 0.1, "{}", e2 / e1);
+    // The paper's level. The setting matches G's only up to the bodies:
+    // our ghosts are G's outline redrawn and filled by a 641-point lattice
+    // (W0 0.6% below G's 2.14726 J), not G's VTK points, and the energy
+    // error lives on the contact, where those points differ. Measured
+    // 1.1475e-3, 29% above G's 0.888e-3: asserted within 35%.
+    assert!((e1 / 0.888e-3 - 1.0).abs() < 0.35, "{e1:e}");
+    // Halving the time step halves the error: USF gains dt^2 a.M a / 2 per
+    // step (docs/verification.md), t/dt steps make it first order in dt, so
+    // the ratio is 1/2 up to O(dt) terms (G: 0.501; measured 0.506).
+    assert!((e2 / e1 - 0.5).abs() < 0.015, "{}", e2 / e1);
     // USL with the lumped mass dissipates an order more than USF (G Table 3:
     // 8.4e-3 against 0.89e-3 at h = 0.1 m, 1000 steps).
     let ul = mean_energy_error(&collision(1000, MassKind::Lumped, StressUpdate::Usl, None));
@@ -265,7 +270,11 @@ fn elastic_collision_energy_error() {
     // which is what G Fig. 13b shows for its stabilised USL.
     let ms = mean_energy_error(&collision(1000, MassKind::Stabilised, StressUpdate::Musl, None));
     println!("MUSL stabilised {ms:.4e} ({:.2} x USF stabilised)", ms / e1);
-    assert!(ms < 2.0 * e1 && ms > 0.5 * e1, "{ms:e} vs {e1:e}");
+    // MUSL loses per step what USF gains (dt^2 a.M a / 2), so the mean
+    // absolute errors agree to leading order; the O(dt^3) terms and the
+    // different paths after contact leave a few percent (measured 1.055):
+    // within 10%.
+    assert!((ms / e1 - 1.0).abs() < 0.1, "{ms:e} vs {e1:e}");
 }
 
 #[test]

@@ -326,36 +326,3 @@ fn translating_domain_conditioning() {
     // ... bounded with (G: ~1e1-1e2).
     assert!(worst.0 < 1e3, "{worst:?}");
 }
-
-/// G Table 5 in full: `cargo test --release --test finite -- --ignored --nocapture beam_table`
-/// (about a minute; the closing note and docs/verification.md carry its output).
-#[test]
-#[ignore]
-fn beam_table() {
-    println!(
-        "| h (m) | points/cell | ghost | completed steps | Newton iterations (total / max per step) | tip (x, y) m |"
-    );
-    println!("|---|---|---|---|---|---|");
-    for h in [0.5, 0.25, 0.125] {
-        for n in 2..=6 {
-            for gamma in [12.0e6, 0.0] {
-                let g = if gamma > 0.0 { "yes" } else { "no" };
-                match beam(h, n, gamma) {
-                    Ok((steps, total, most, tip)) => {
-                        println!(
-                            "| {h} | {} | {g} | {steps} | {total} / {most} | ({:.3}, {:.3}) |",
-                            n * n,
-                            tip[0],
-                            tip[1]
-                        )
-                    }
-                    Err((done, f)) => println!(
-                        "| {h} | {} | {g} | {done} (fails at step {}) | - | - |",
-                        n * n,
-                        f.step()
-                    ),
-                }
-            }
-        }
-    }
-}

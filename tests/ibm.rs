@@ -89,10 +89,15 @@ fn delta_trade_off() {
     for (d, e, k) in &rows {
         println!("delta/h {d:.0e}: displacement_l2 {e:.4e}, cond(K) {k:.3e}");
     }
-    // Falls linearly while the band's modelling error dominates (each
-    // factor 100 in delta is a factor ~100 in the error)...
+    // Falls linearly while the band's modelling error dominates: that error
+    // is c delta/h (c = 0.24 in the cells along a boundary with normal
+    // strain, 0.74 in cut cells; docs/verification.md), so the log-log
+    // slope is 1. Measured 1.010 (1e-2 to 1e-4) and 1.014 (1e-4 to 1e-6);
+    // 2% leaves room for the O((delta/h)^2) term and the 4e-9 round-off
+    // floor; an error of any other order in delta/h leaves it.
     for w in rows[..3].windows(2) {
-        assert!(w[1].1 < 0.02 * w[0].1, "{rows:?}");
+        let slope = (w[0].1 / w[1].1).log10() / (w[0].0 / w[1].0).log10();
+        assert!((slope - 1.0).abs() < 0.02, "slope {slope}: {rows:?}");
     }
     // ... bottoms out at delta/h = 1e-6 to 1e-8 (C Fig. 13: ~1e-8 for
     // delta/h <= 1e-6) ...
@@ -101,10 +106,14 @@ fn delta_trade_off() {
     assert!(best < 2e-8, "{rows:?}");
     // ... then rises again (round-off amplified by cond ~ 1e16 and more).
     assert!(rows[4].1 > 10.0 * best && rows[5].1 > 10.0 * rows[4].1, "{rows:?}");
-    // cond(K) ~ 1/delta: each factor 100 in delta is a factor ~100 in cond.
+    // cond(K) ~ 1/delta: lambda_max is the band's penalty ~E/delta once it
+    // dominates the bulk stiffness and lambda_min does not depend on delta,
+    // so each factor 100 in delta is a factor 100 in cond. Measured 97.6
+    // from 1e-2 to 1e-4 (the bulk still adds ~2% to lambda_max at 1e-2),
+    // then 100.0: within 3%.
     for w in rows[..5].windows(2) {
         let ratio = w[1].2 / w[0].2;
-        assert!((50.0..200.0).contains(&ratio), "{rows:?}");
+        assert!((ratio / 100.0 - 1.0).abs() < 0.03, "ratio {ratio}: {rows:?}");
     }
 }
 
@@ -177,27 +186,33 @@ fn deep_beam_matches_c_tables_2_and_3() {
     // C Table 2 (h = 10 mm): normalised error of u_y at A against the FE
     // solution on the same grid, by points per cell.
     let fe = deep_beam_a(2, 10.0, true);
+    // The measure is the integration error of clipped points against 2x2
+    // Gauss, the same here as in the paper, so it agrees to the paper's
+    // digits: within half a unit of the last digit C prints, plus 2e-8.
+    // That 2e-8 is what the measure can resolve: a relative change of u_A
+    // changes it by as much in absolute terms, and u_A carries the band's
+    // O(delta/h) error (delta = 1e-6 h here; C's own delta is not known to
+    // the digit) through the cells along the boundary, ~1e-8 of u_A.
+    // Measured deviations: 1.1e-9 to 9.3e-9 (largest at 10^2 points:
+    // 1.481107e-4 against C's 1.4812e-4).
     let table2 = [
-        (3usize, 1.6653e-3),
-        (5, 5.9450e-4),
-        (10, 1.4812e-4),
-        (15, 6.5788e-5),
-        (20, 3.6998e-5),
+        (3usize, 1.6653e-3, 1e-7),
+        (5, 5.9450e-4, 1e-8),
+        (10, 1.4812e-4, 1e-8),
+        (15, 6.5788e-5, 1e-9),
+        (20, 3.6998e-5, 1e-9),
     ];
-    for (n, paper) in table2 {
+    for (n, paper, unit) in table2 {
         let e = ((deep_beam_a(n, 10.0, false) - fe) / fe).abs();
-        println!("h = 10, {n}^2 points: {e:.4e} (C: {paper:.4e})");
-        // The difference is the integration error of clipped points against
-        // 2x2 Gauss, the same here as in the paper: agreement to 1% (the
-        // O(delta/h) boundary error, ~1e-7, is far below).
-        assert!((e - paper).abs() < 0.01 * paper, "{n}: {e} vs {paper}");
+        println!("h = 10, {n}^2 points: {e:.6e} (C: {paper:.4e})");
+        assert!((e - paper).abs() < 0.5 * unit + 2e-8, "{n}: {e} vs {paper}");
     }
-    // C Table 3 (16 points per cell): by grid size.
-    for (h, paper) in [(10.0, 9.313e-4), (5.0, 3.110e-4), (2.0, 7.558e-5)] {
+    // C Table 3 (16 points per cell): by grid size, four digits.
+    for (h, paper, unit) in [(10.0, 9.313e-4, 1e-7), (5.0, 3.110e-4, 1e-7), (2.0, 7.558e-5, 1e-8)] {
         let fe = deep_beam_a(2, h, true);
         let e = ((deep_beam_a(4, h, false) - fe) / fe).abs();
-        println!("h = {h}, 4^2 points: {e:.4e} (C: {paper:.4e})");
-        assert!((e - paper).abs() < 0.01 * paper, "h {h}: {e} vs {paper}");
+        println!("h = {h}, 4^2 points: {e:.6e} (C: {paper:.4e})");
+        assert!((e - paper).abs() < 0.5 * unit + 2e-8, "h {h}: {e} vs {paper}");
     }
 }
 
