@@ -222,15 +222,16 @@ fn check(path: &Path, limits: &Limits) -> Result<ExitCode> {
     };
     let m = sim.model();
     out!(
-        "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps",
+        "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps, memory estimate within the {} budget",
         path.display(),
         m.name,
         m.grid.nx,
         m.grid.ny,
-        m.grid.h,
+        mpmlab::scene::number(m.grid.h),
         m.bodies.len(),
         m.points.len(),
-        m.analysis.load_steps
+        m.analysis.load_steps,
+        mpmlab::model::bytes(limits.max_memory)
     );
     Ok(ExitCode::SUCCESS)
 }

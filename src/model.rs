@@ -84,6 +84,9 @@ pub const MAX_POINTS: usize = 10_000_000;
 /// Most vertices of an implicit boundary's polyline, and most tracking
 /// points of a B-spline boundary.
 pub const MAX_CURVE_POINTS: usize = 100_000;
+/// Most materials, bodies, boundaries and implicit boundaries (each);
+/// grid-aligned conditions may be ten times as many.
+pub const MAX_ENTRIES: usize = 1_000;
 /// Most point loads.
 pub const MAX_POINT_LOADS: usize = 10_000;
 /// Largest `dense_limit` (a dense eigenproblem of this many unknowns).
@@ -92,7 +95,7 @@ pub const MAX_DENSE_LIMIT: usize = 20_000;
 pub const MAX_NAME: usize = 100;
 /// Most cells (or lattice points) times region pieces that point
 /// generation may test against each other.
-const MAX_GENERATION_WORK: u128 = 4_000_000_000;
+const MAX_GENERATION_WORK: u128 = 1_000_000_000;
 
 /// Estimated bytes per material point while stepping: the point arrays,
 /// its stencil (values, gradients, node indices), its constitutive
@@ -476,6 +479,16 @@ impl Model {
                 ),
             ));
         }
+        if (scene.loads.point.len() as u128) * (points.len() as u128) > MAX_GENERATION_WORK {
+            return Err(FieldError::new(
+                "loads.point",
+                format!(
+                    "finding the nearest of {} points for each of {} point loads is more than the {MAX_GENERATION_WORK} tests allowed; use fewer point loads",
+                    points.len(),
+                    scene.loads.point.len()
+                ),
+            ));
+        }
         for (k, l) in scene.loads.point.iter().enumerate() {
             if !l.at.iter().all(|v| v.is_finite()) {
                 return Err(FieldError::new(format!("loads.point[{k}].at"), "must be finite"));
@@ -554,6 +567,28 @@ impl Model {
             Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
         };
 
+        // Tracking points of all boundaries, and vertices of all implicit
+        // boundaries, together.
+        let mut total = 0usize;
+        for (k, b) in scene.boundaries.iter().enumerate() {
+            total = total.saturating_add(b.points.as_ref().map_or(0, Vec::len));
+            if total > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    format!("boundary[{k}].points"),
+                    format!("the boundaries have more than the {MAX_CURVE_POINTS} tracking points supported in all"),
+                ));
+            }
+        }
+        let mut total = 0usize;
+        for (k, b) in scene.ibm.iter().enumerate() {
+            total = total.saturating_add(b.points.len());
+            if total > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    format!("ibm[{k}].points"),
+                    format!("the implicit boundaries have more than the {MAX_CURVE_POINTS} points supported in all"),
+                ));
+            }
+        }
         let mut boundaries: Vec<Boundary> = Vec::new();
         for (k, spec) in scene.boundaries.iter().enumerate() {
             if boundaries.iter().any(|b| b.name == spec.name) {
@@ -626,6 +661,16 @@ impl Model {
                     let s = boundaries[idx]
                         .spline(&points)
                         .map_err(|e| FieldError::new(f("boundary"), e.to_string()))?;
+                    if s.segments.len().saturating_mul(spec.per_segment) > MAX_CURVE_POINTS {
+                        return Err(FieldError::new(
+                            f("per_segment"),
+                            format!(
+                                "{} segments x {} chords are more than the {MAX_CURVE_POINTS} vertices a polyline may have",
+                                s.segments.len(),
+                                spec.per_segment
+                            ),
+                        ));
+                    }
                     (s.sample(spec.per_segment), Some((idx, spec.per_segment)))
                 }
                 (None, false) => (spec.points.clone(), None),
@@ -953,6 +998,20 @@ fn check_name(field: &str, name: &str) -> Result<(), FieldError> {
 /// Names are well-formed, and unique across materials, bodies, B-spline
 /// boundaries and implicit boundaries: a name refers to one thing.
 fn check_names(scene: &Scene) -> Result<(), FieldError> {
+    for (table, n, cap) in [
+        ("material", scene.materials.len(), MAX_ENTRIES),
+        ("body", scene.bodies.len(), MAX_ENTRIES),
+        ("boundary", scene.boundaries.len(), MAX_ENTRIES),
+        ("ibm", scene.ibm.len(), MAX_ENTRIES),
+        ("dirichlet", scene.dirichlet.len(), 10 * MAX_ENTRIES),
+    ] {
+        if n > cap {
+            return Err(FieldError::new(
+                format!("{table}[{cap}]"),
+                format!("{n} [[{table}]] entries are more than the {cap} supported"),
+            ));
+        }
+    }
     check_name("scene.name", &scene.scene.name)?;
     if scene.scene.name.starts_with('.') {
         return Err(FieldError::new(
@@ -960,7 +1019,7 @@ fn check_names(scene: &Scene) -> Result<(), FieldError> {
             "must not start with `.` (it names recording files)",
         ));
     }
-    let mut seen: Vec<(&str, String)> = Vec::new();
+    let mut seen: std::collections::HashMap<&str, String> = std::collections::HashMap::new();
     let named = scene
         .materials
         .iter()
@@ -990,13 +1049,13 @@ fn check_names(scene: &Scene) -> Result<(), FieldError> {
     for (at, name) in named {
         let field = format!("{at}.name");
         check_name(&field, name)?;
-        if let Some((_, first)) = seen.iter().find(|(n, _)| *n == name.as_str()) {
+        if let Some(first) = seen.get(name.as_str()) {
             return Err(FieldError::new(
                 field,
                 format!("the name `{name}` is already used by {first}; names must be unique"),
             ));
         }
-        seen.push((name.as_str(), at));
+        seen.insert(name.as_str(), at);
     }
     Ok(())
 }

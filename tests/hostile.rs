@@ -1264,6 +1264,28 @@ fn cases() -> Vec<Case> {
         });
     }
 
+    // Too many entries: bounded before anything quadratic in them runs.
+    let mats: String = (0..1001)
+        .map(|k| format!("[[material]]\nname = \"m{k}\"\nE = 1.0e6\nnu = 0.3\n\n"))
+        .collect();
+    c.patch(
+        "entries-1001-materials",
+        "[[body]]",
+        &format!("{mats}[[body]]"),
+        "more than the 1000 supported",
+        "material[1000]",
+    );
+    let loads: String = (0..10_001)
+        .map(|_| "[[loads.point]]\nat = [1.0, 1.0]\nforce = [0.0, -1.0]\n".to_string())
+        .collect();
+    c.patch(
+        "entries-10001-point-loads",
+        "[analysis]",
+        &format!("{loads}\n[analysis]"),
+        "more than the 10000 supported",
+        "loads.point",
+    );
+
     c.0
 }
 
@@ -1330,6 +1352,7 @@ fn verdict(c: &Case, path: &Path, code: i32, err: &str) -> Option<String> {
 fn broken_scenes_are_refused_with_located_messages() {
     let cases = cases();
     assert!(cases.len() >= 150, "{} cases", cases.len());
+    eprintln!("{} broken scenes", cases.len());
     let dir = temp_path("hostile", "d");
     std::fs::create_dir_all(&dir).unwrap();
     let results = check_all(&cases, &dir);
