@@ -173,7 +173,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         _ => return Err(format!("`{s}`: unknown unit `{unit}` (use k, M, G or T)")),
     };
     let b = x * scale;
-    if !(b >= 1.0 && b < 1.8e19) {
+    if !(1.0..1.8e19).contains(&b) {
         return Err(format!("`{s}` is not a usable memory size"));
     }
     Ok(b as u64)
@@ -965,7 +965,7 @@ fn build_grid(scene: &Scene) -> Result<Grid, FieldError> {
 /// [`number`].
 fn short(x: f64) -> String {
     let a = x.abs();
-    if x == 0.0 || (a >= 1e-3 && a < 1e9) {
+    if x == 0.0 || (1e-3..1e9).contains(&a) {
         format!("{x:.4}")
     } else {
         number(x)

@@ -222,7 +222,7 @@ pub const MIN_MAGNITUDE: f64 = 1e-30;
 /// A number for a message: plain when short, `1.2346e-300` otherwise.
 pub fn number(x: f64) -> String {
     let a = x.abs();
-    if x == 0.0 || (a >= 1e-4 && a < 1e9 && format!("{x}").len() <= 20) {
+    if x == 0.0 || ((1e-4..1e9).contains(&a) && format!("{x}").len() <= 20) {
         format!("{x}")
     } else {
         format!("{x:.4e}")
