@@ -1866,3 +1866,41 @@ fn shipped_scenes_cached() -> &'static [(String, String)] {
     static SCENES: std::sync::OnceLock<Vec<(String, String)>> = std::sync::OnceLock::new();
     SCENES.get_or_init(shipped_scenes)
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2000, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// Any shipped scene with characters inserted, deleted or replaced at
+    /// random (multi-byte ones too) is parsed and built without a panic,
+    /// and a refusal is located.
+    #[test]
+    fn scenes_edited_as_text_build_or_fail_located(
+        which in any::<prop::sample::Index>(),
+        edits in prop::collection::vec(
+            (any::<prop::sample::Index>(), 0usize..4, prop::sample::select(vec![
+                "", "=", "[", "]", "{", "}", "\"", ",", "\n", "#", ".", "-", "e", "9", "é", "→", "\u{0}", "[[", "]]", "= [", "nan", "1e400",
+            ])),
+            1..6,
+        ),
+    ) {
+        let scenes = shipped_scenes_cached();
+        let (file, text) = &scenes[which.index(scenes.len())];
+        let mut t = text.clone();
+        for (at, cut, insert) in &edits {
+            let mut k = at.index(t.len() + 1);
+            while !t.is_char_boundary(k) {
+                k -= 1;
+            }
+            let mut end = (k + cut).min(t.len());
+            while !t.is_char_boundary(end) {
+                end += 1;
+            }
+            t.replace_range(k..end, insert);
+        }
+        let limits = Limits { max_memory: 64 << 20 };
+        if let Err(e) = Scene::parse(&t, file).and_then(|s| Model::build_with(&s, &t, file, &limits)) {
+            prop_assert!(e.line >= 1 && e.column >= 1, "{e}\n{t}");
+            prop_assert!(!e.field.is_empty() && e.field != "(document)", "{e}\n{t}");
+        }
+    }
+}
