@@ -29,12 +29,7 @@ pub(crate) type BandView<'a> = (&'a [Option<Vec<GradOp>>], &'a [P2], &'a [P2]);
 /// Material response and internal force of the points for nodal
 /// increments `total` (`d + d^a`), with the in-band points' operators
 /// `ops` acting on the unknowns `d` (and `grad(S d^a)`).
-pub(crate) fn evaluate_with(
-    sim: &Simulation,
-    map: &Mapping,
-    total: &[P2],
-    band: Option<BandView>,
-) -> Iterate {
+pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band: Option<BandView>) -> Iterate {
     let pts = &sim.state.points;
     let mut it = Iterate {
         responses: Vec::with_capacity(pts.len()),

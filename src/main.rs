@@ -3,6 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use mpmlab::model::Limits;
 use mpmlab::record::Recorder;
 use mpmlab::runner::{Observer, RunEnd};
 use mpmlab::scene::Scene;
@@ -37,15 +38,30 @@ enum Cmd {
     /// Run a scene headless: per-step table and summary.
     Run {
         scene: PathBuf,
-        /// Write a rerun recording (.rrd) of the run.
+        /// Write a rerun recording (.rrd) of the run. An existing file is
+        /// replaced only when it is a recording (or with --force); never the
+        /// scene itself.
         #[arg(long)]
         record: Option<PathBuf>,
+        /// Replace an existing --record file whatever it holds.
+        #[arg(long, requires = "record")]
+        force: bool,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Refuse scenes whose estimated memory exceeds this (bytes, or
+        /// with k, M, G, T); default half of the available memory.
+        #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+        max_memory: Option<u64>,
     },
     /// Validate a scene file without running it.
-    Check { scene: PathBuf },
+    Check {
+        scene: PathBuf,
+        /// Refuse scenes whose estimated memory exceeds this (bytes, or
+        /// with k, M, G, T); default half of the available memory.
+        #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+        max_memory: Option<u64>,
+    },
     /// List the scenes in a folder with their descriptions.
     List {
         #[arg(default_value = "scenarios")]
@@ -72,10 +88,27 @@ enum Cmd {
         /// Do not record.
         #[arg(long, conflicts_with = "record")]
         no_record: bool,
+        /// Replace an existing --record file whatever it holds.
+        #[arg(long, requires = "record")]
+        force: bool,
+        /// Refuse scenes whose estimated memory exceeds this (bytes, or
+        /// with k, M, G, T); default half of the available memory.
+        #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+        max_memory: Option<u64>,
         /// Show a sweep folder instead (table, error against time and h).
-        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record"])]
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory"])]
         sweep: Option<PathBuf>,
     },
+}
+
+/// A `--max-memory` value.
+fn parse_size(s: &str) -> Result<u64, String> {
+    mpmlab::model::parse_bytes(s)
+}
+
+/// The limits of `--max-memory` (default: half of the available memory).
+fn limits(max_memory: Option<u64>) -> Limits {
+    max_memory.map_or_else(Limits::default, |m| Limits { max_memory: m })
 }
 
 /// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed,
@@ -83,8 +116,14 @@ enum Cmd {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Some(Cmd::Run { scene, record, quiet }) => run(&scene, record.as_deref(), quiet),
-        Some(Cmd::Check { scene }) => check(&scene),
+        Some(Cmd::Run {
+            scene,
+            record,
+            force,
+            quiet,
+            max_memory,
+        }) => run(&scene, record.as_deref(), force, quiet, &limits(max_memory)),
+        Some(Cmd::Check { scene, max_memory }) => check(&scene, &limits(max_memory)),
         Some(Cmd::List { dir }) => list(&dir),
         Some(Cmd::Sweep(args)) => sweep(args),
         Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
@@ -94,9 +133,11 @@ fn main() -> ExitCode {
             scene,
             record,
             no_record,
+            force,
+            max_memory,
             sweep: None,
-        }) => tui(scene.as_deref(), record, no_record),
-        None => tui(None, None, false),
+        }) => tui(scene.as_deref(), record, no_record, force, &limits(max_memory)),
+        None => tui(None, None, false, false, &Limits::default()),
     };
     match result {
         Ok(code) => code,
@@ -107,34 +148,91 @@ fn main() -> ExitCode {
     }
 }
 
-fn load(path: &Path) -> Result<(Simulation, String), ExitCode> {
+fn load(path: &Path, limits: &Limits) -> Result<(Simulation, String), ExitCode> {
     let (scene, text) = Scene::load(path).map_err(|e| {
         eprintln!("error: {e}");
         ExitCode::from(2)
     })?;
-    let model = Model::build(&scene, &text, &path.display().to_string()).map_err(|e| {
+    let model = Model::build_with(&scene, &text, &path.display().to_string(), limits).map_err(|e| {
         eprintln!("error: {e}");
         ExitCode::from(2)
     })?;
     Ok((Simulation::new(model), text))
 }
 
-fn check(path: &Path) -> Result<ExitCode> {
-    let (sim, _) = match load(path) {
+/// Whether `record` may be written: not the scene itself, not a
+/// directory, and, when it exists and is not empty, a rerun recording
+/// (its first bytes `RRF0`..`RRF2`) unless `force`. Refusals are bad
+/// arguments (exit 2); nothing has been written.
+fn check_record_target(record: &Path, scene: Option<&Path>, force: bool) -> Result<(), String> {
+    let same = |a: &Path, b: &Path| match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if let Some(scene) = scene {
+        if same(record, scene) && !force {
+            return Err(format!(
+                "--record {} is the scene file itself; give another recording path",
+                record.display()
+            ));
+        }
+    }
+    let Ok(meta) = std::fs::metadata(record) else {
+        return Ok(());
+    };
+    if meta.is_dir() {
+        return Err(format!(
+            "--record {} is a directory; give a file path such as {}",
+            record.display(),
+            record.join("run.rrd").display()
+        ));
+    }
+    if force {
+        return Ok(());
+    }
+    if !meta.is_file() {
+        return Err(format!(
+            "--record {} exists and is not a regular file; refusing to write to it (--force to do so anyway)",
+            record.display()
+        ));
+    }
+    let mut magic = [0u8; 4];
+    use std::io::Read as _;
+    let n = std::fs::File::open(record)
+        .and_then(|mut f| f.read(&mut magic))
+        .map_err(|e| {
+            format!(
+                "--record {}: cannot read the existing file: {}",
+                record.display(),
+                mpmlab::scene::io_reason(&e)
+            )
+        })?;
+    if n == 0 || [b"RRF0", b"RRF1", b"RRF2"].contains(&&magic) {
+        return Ok(());
+    }
+    Err(format!(
+        "--record {} exists and is not a rerun recording; refusing to overwrite it (choose another path, or --force)",
+        record.display()
+    ))
+}
+
+fn check(path: &Path, limits: &Limits) -> Result<ExitCode> {
+    let (sim, _) = match load(path, limits) {
         Ok(s) => s,
         Err(code) => return Ok(code),
     };
     let m = sim.model();
     out!(
-        "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps",
+        "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps, memory estimate within the {} budget",
         path.display(),
         m.name,
         m.grid.nx,
         m.grid.ny,
-        m.grid.h,
+        mpmlab::scene::number(m.grid.h),
         m.bodies.len(),
         m.points.len(),
-        m.analysis.load_steps
+        m.analysis.load_steps,
+        mpmlab::model::bytes(limits.max_memory)
     );
     Ok(ExitCode::SUCCESS)
 }
@@ -148,9 +246,9 @@ fn list(dir: &Path) -> Result<ExitCode> {
     entries.sort();
     for p in entries {
         let file = p.display().to_string();
-        match std::fs::read_to_string(&p)
+        match mpmlab::scene::read_scene_text(&p)
+            .and_then(|t| Scene::parse(&t, &file))
             .map_err(|e| e.to_string())
-            .and_then(|t| Scene::parse(&t, &file).map_err(|e| e.to_string()))
         {
             Ok(s) => {
                 let desc = s.scene.description.split_whitespace().collect::<Vec<_>>().join(" ");
@@ -295,8 +393,14 @@ impl Observer for Table {
     }
 }
 
-fn run(path: &Path, record: Option<&Path>, quiet: bool) -> Result<ExitCode> {
-    let (mut sim, text) = match load(path) {
+fn run(path: &Path, record: Option<&Path>, force: bool, quiet: bool, limits: &Limits) -> Result<ExitCode> {
+    if let Some(r) = record {
+        if let Err(e) = check_record_target(r, Some(path), force) {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    }
+    let (mut sim, text) = match load(path, limits) {
         Ok(s) => s,
         Err(code) => return Ok(code),
     };
@@ -450,9 +554,9 @@ struct SweepArgs {
     /// A paper study: plate-hole-h, delta, beam-stability, column-gamma.
     #[arg(long, conflicts_with = "scene")]
     preset: Option<String>,
-    /// Runs at a time (each single-threaded, in its own process).
-    #[arg(long, default_value_t = 1)]
-    jobs: usize,
+    /// Runs at a time (each single-threaded, in its own process), 1 or more.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+    jobs: u16,
     /// Sweep folder (default sweeps/<scene or preset>).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -464,17 +568,110 @@ struct SweepArgs {
     collect: Option<PathBuf>,
 }
 
+/// `mpmlab sweep --collect DIR`: merge the results, warn about runs
+/// without a result and failed runs; exit 1 when nothing was collected.
+fn collect(dir: &Path) -> Result<ExitCode> {
+    use mpmlab::sweep::{driver, Folder};
+    let folder = Folder(dir.to_path_buf());
+    let order: Vec<String> = std::fs::read_to_string(dir.join("runs.txt"))
+        .map(|t| t.lines().filter(|l| !l.is_empty()).map(str::to_string).collect())
+        .unwrap_or_default();
+    if !dir.is_dir() || (order.is_empty() && !folder.results().is_dir() && !folder.csv().is_file()) {
+        eprintln!(
+            "error: {} is not a sweep folder (no runs.txt, results/ or sweep.csv)",
+            dir.display()
+        );
+        return Ok(ExitCode::from(2));
+    }
+    let found = folder.collect();
+    let missing: Vec<&String> = order.iter().filter(|id| !found.contains_key(*id)).collect();
+    let listed = |ids: &[&String]| {
+        let mut s = ids.iter().take(10).map(|s| s.as_str()).collect::<Vec<_>>().join(", ");
+        if ids.len() > 10 {
+            s.push_str(&format!(", ... ({} more)", ids.len() - 10));
+        }
+        s
+    };
+    if !missing.is_empty() {
+        eprintln!(
+            "warning: {} of {} runs have no result (not run yet, or their process died): {}",
+            missing.len(),
+            order.len(),
+            listed(&missing)
+        );
+    }
+    let collected: Vec<_> = if order.is_empty() {
+        found.values().collect()
+    } else {
+        order.iter().filter_map(|id| found.get(id)).collect()
+    };
+    let failed: Vec<&String> = collected.iter().filter(|r| !r.completed).map(|r| &r.id).collect();
+    if !failed.is_empty() {
+        eprintln!(
+            "warning: {} of {} collected runs did not complete: {}",
+            failed.len(),
+            collected.len(),
+            listed(&failed)
+        );
+    }
+    if collected.is_empty() {
+        eprintln!("error: nothing to collect in {}: no run has a result", dir.display());
+        return Ok(ExitCode::from(1));
+    }
+    let title = dir
+        .file_name()
+        .map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
+    out!("{}", driver::finish(&folder, &title).map_err(anyhow::Error::msg)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Every run's scene must parse (every --vary key names a scene field,
+/// every value has its type and range) before anything is written or run.
+/// Runs whose scene then fails validation (an `h` that does not divide the
+/// grid) are warned about and become failed rows, unless every run does.
+fn validate_runs(base: &str, fixed: &[(String, String)], runs: &[mpmlab::sweep::Run]) -> Result<(), String> {
+    let mut texts = Vec::new();
+    for r in runs {
+        let settings: Vec<String> = r.settings.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        let what = format!("run `{}` ({})", r.id, settings.join(" "));
+        let text = mpmlab::sweep::run_scene(base, fixed, r).map_err(|e| format!("{what}: {e}"))?;
+        if let Err(e) = Scene::parse(&text, &r.id) {
+            return Err(format!(
+                "{what} is not a valid scene: field `{}`: {}",
+                e.field, e.message
+            ));
+        }
+        texts.push((text, what));
+    }
+    let mut invalid = Vec::new();
+    for (text, what) in &texts {
+        if let Err(e) = Model::from_text(text, "run") {
+            invalid.push(format!(
+                "{what} is not a valid scene: field `{}`: {}",
+                e.field, e.message
+            ));
+        }
+    }
+    if !invalid.is_empty() && invalid.len() == texts.len() {
+        return Err(format!(
+            "no run is a valid scene; the first: {}",
+            invalid.swap_remove(0)
+        ));
+    }
+    for w in invalid {
+        eprintln!("warning: {w}; it will be a failed row");
+    }
+    Ok(())
+}
+
 /// `mpmlab sweep`: plan, run (or emit) and summarise. Exit 2 for bad
-/// arguments or scenes; failed runs are rows of the table, not errors.
+/// arguments or scenes, including any run whose settings make an invalid
+/// scene (checked before anything runs); failed runs are rows of the
+/// table, not errors.
 fn sweep(a: SweepArgs) -> Result<ExitCode> {
-    use mpmlab::sweep::{driver, presets, Folder, Vary};
+    use mpmlab::sweep::{driver, expand, presets, Folder, Vary};
     if let Some(dir) = a.collect {
-        let folder = Folder(dir.clone());
-        let title = dir
-            .file_name()
-            .map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
-        out!("{}", driver::finish(&folder, &title).map_err(anyhow::Error::msg)?);
-        return Ok(ExitCode::SUCCESS);
+        return collect(&dir);
     }
     let (name, path, fixed, mut varies) = match (&a.preset, &a.scene) {
         (Some(p), _) => {
@@ -499,10 +696,20 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
     if varies.is_empty() {
         anyhow::bail!("nothing to vary: give --vary KEY=V1,V2,...");
     }
-    let base = std::fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
     // The base scene must be valid before anything is written.
-    if let Err(code) = load(&path) {
+    let base = match mpmlab::scene::read_scene_text(&path) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    if let Err(code) = load(&path, &Limits::default()) {
         return Ok(code);
+    }
+    if let Err(e) = validate_runs(&base, &fixed, &expand(&varies)) {
+        eprintln!("error: --vary: {e}");
+        return Ok(ExitCode::from(2));
     }
     let folder = Folder(a.out.unwrap_or_else(|| PathBuf::from("sweeps").join(&name)));
     let runs = driver::prepare(&folder, &base, &fixed, &varies).map_err(anyhow::Error::msg)?;
@@ -516,8 +723,9 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
     );
     if a.emit_jobs {
         let p = driver::emit_jobs(&folder, &exe, &todo).map_err(anyhow::Error::msg)?;
+        let p = std::path::absolute(&p).unwrap_or(p);
         out!(
-            "wrote {} commands to {}; run them anywhere (e.g. `parallel < {}`), then `mpmlab sweep --collect {}`",
+            "wrote {} commands to {} (absolute paths: run them from any directory, e.g. `parallel < {}`), then `mpmlab sweep --collect {}`",
             todo.len(),
             p.display(),
             p.display(),
@@ -525,7 +733,7 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         );
         return Ok(ExitCode::SUCCESS);
     }
-    driver::execute(&folder, &exe, &todo, a.jobs, &|line| out!("{line}"));
+    driver::execute(&folder, &exe, &todo, usize::from(a.jobs), &|line| out!("{line}"));
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
     Ok(ExitCode::SUCCESS)
 }
@@ -619,7 +827,7 @@ fn pick_scene(dir: &Path) -> Result<Option<PathBuf>> {
     let entries: Vec<Entry> = paths
         .into_iter()
         .filter_map(|path| {
-            let text = std::fs::read_to_string(&path).ok()?;
+            let text = mpmlab::scene::read_scene_text(&path).ok()?;
             let s = Scene::parse(&text, &path.display().to_string()).ok()?;
             Some(Entry {
                 path,
@@ -640,9 +848,21 @@ fn pick_scene(dir: &Path) -> Result<Option<PathBuf>> {
     Ok(pick(picker).context("terminal UI")?.map(|e| e.path))
 }
 
-fn tui(scene: Option<&Path>, record: Option<PathBuf>, no_record: bool) -> Result<ExitCode> {
+fn tui(
+    scene: Option<&Path>,
+    record: Option<PathBuf>,
+    no_record: bool,
+    force: bool,
+    limits: &Limits,
+) -> Result<ExitCode> {
+    if let Some(r) = &record {
+        if let Err(e) = check_record_target(r, scene, force) {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    }
     let (sim, text) = match scene {
-        Some(p) => match load(p) {
+        Some(p) => match load(p, limits) {
             Ok(s) => s,
             Err(code) => return Ok(code),
         },
@@ -657,7 +877,7 @@ fn tui(scene: Option<&Path>, record: Option<PathBuf>, no_record: bool) -> Result
             } else {
                 PathBuf::from(DEFAULT_SCENE)
             };
-            match load(&path) {
+            match load(&path, limits) {
                 Ok(s) => s,
                 Err(code) => return Ok(code),
             }

@@ -11,6 +11,7 @@ use crate::ibm::IbmBoundary;
 use crate::material::{LinearElastic, Material};
 use crate::points::Points;
 use crate::quadrature::gauss_legendre;
+use crate::scene::number;
 use crate::scene::{
     AnalysisSpec, BodySpec, BoundarySpec, DirichletKind, ExactSpec, FieldError, LayerSide, Locator, MaterialModel,
     MaterialSide, Placement, RegionSpec, Scene, SceneError, TractionSpec,
@@ -74,13 +75,118 @@ pub struct Model {
 }
 
 /// Largest grid the engine will build (cells).
-const MAX_CELLS: usize = 20_000_000;
+pub const MAX_CELLS: usize = 20_000_000;
+/// Most material points a model may have.
+pub const MAX_POINTS: usize = 10_000_000;
+/// Most vertices of an implicit boundary's polyline, and most tracking
+/// points of a B-spline boundary.
+pub const MAX_CURVE_POINTS: usize = 100_000;
+/// Most materials, bodies, boundaries and implicit boundaries (each);
+/// grid-aligned conditions may be ten times as many.
+pub const MAX_ENTRIES: usize = 1_000;
+/// Most point loads.
+pub const MAX_POINT_LOADS: usize = 10_000;
+/// Largest `dense_limit` (a dense eigenproblem of this many unknowns).
+pub const MAX_DENSE_LIMIT: usize = 20_000;
+/// Most characters of a name.
+pub const MAX_NAME: usize = 100;
+/// Most cells (or lattice points) times region pieces that point
+/// generation may test against each other.
+const MAX_GENERATION_WORK: u128 = 1_000_000_000;
+
+/// Estimated bytes per material point while stepping: the point arrays,
+/// its stencil (values, gradients, node indices), its constitutive
+/// response and its share of the recorded and reported fields. Measured
+/// peaks: 1.2 kB per point (a 10^6-point lattice, linear, standard basis,
+/// recorded), 1.6 kB (GIMP with Newton; explicit dynamics).
+pub const BYTES_PER_POINT: u64 = 4_096;
+/// Estimated bytes per grid node, for the per-node arrays every step
+/// allocates over the whole grid (dof numbering, prescribed values, nodal
+/// displacements and residuals, cell flags).
+pub const BYTES_PER_GRID_NODE: u64 = 512;
+/// Estimated bytes per node a body may make active: its rows of the sparse
+/// stiffness (or mass) matrix and of the Cholesky factor with fill-in
+/// (measured: about 3.5 kB per node for 1.6e5 active nodes).
+pub const BYTES_PER_ACTIVE_NODE: u64 = 8_192;
+
+/// Resource limits applied when a model is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest memory estimate accepted (bytes).
+    pub max_memory: u64,
+}
+
+impl Default for Limits {
+    /// Half of the memory available now (`MemAvailable` in /proc/meminfo),
+    /// or 4 GiB where that cannot be read.
+    fn default() -> Self {
+        Limits {
+            max_memory: available_memory().map_or(4 << 30, |m| m / 2),
+        }
+    }
+}
+
+/// `MemAvailable` of /proc/meminfo (bytes).
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kb: u64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("MemAvailable:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    kb.checked_mul(1024)
+}
+
+/// Bytes in words: `512 B`, `3.2 MB`, `18.4 GB` (powers of 1000).
+pub fn bytes(b: u64) -> String {
+    let b = b as f64;
+    match b {
+        b if b < 1e3 => format!("{b} B"),
+        b if b < 1e6 => format!("{:.1} kB", b / 1e3),
+        b if b < 1e9 => format!("{:.1} MB", b / 1e6),
+        b if b < 1e12 => format!("{:.1} GB", b / 1e9),
+        b => format!("{:.1} TB", b / 1e12),
+    }
+}
+
+/// Parse a memory size: bytes, or with a suffix `k`, `M`, `G`, `T`
+/// (powers of 1024, optionally followed by `B` or `iB`).
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let digits = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
+    let (num, unit) = t.split_at(digits);
+    let x: f64 = num
+        .parse()
+        .map_err(|_| format!("`{s}` is not a size (examples: 512M, 4G, 1000000)"))?;
+    let scale: f64 = match unit.trim().trim_end_matches("iB").trim_end_matches('B') {
+        "" => 1.0,
+        "k" | "K" => 1024.0,
+        "m" | "M" => 1024.0 * 1024.0,
+        "g" | "G" => 1024.0 * 1024.0 * 1024.0,
+        "t" | "T" => 1024.0 * 1024.0 * 1024.0 * 1024.0,
+        _ => return Err(format!("`{s}`: unknown unit `{unit}` (use k, M, G or T)")),
+    };
+    let b = x * scale;
+    if !(1.0..1.8e19).contains(&b) {
+        return Err(format!("`{s}` is not a usable memory size"));
+    }
+    Ok(b as u64)
+}
 
 impl Model {
-    /// Validate a parsed scene and build the model. `text` and `file` are the
-    /// scene's source, used to locate errors.
+    /// Validate a parsed scene and build the model with the default
+    /// [`Limits`]. `text` and `file` are the scene's source, used to
+    /// locate errors.
     pub fn build(scene: &Scene, text: &str, file: &str) -> Result<Model, SceneError> {
-        Self::build_unlocated(scene).map_err(|e| Locator::new(text).error(file, e))
+        Self::build_with(scene, text, file, &Limits::default())
+    }
+
+    /// [`Model::build`] with explicit resource limits.
+    pub fn build_with(scene: &Scene, text: &str, file: &str, limits: &Limits) -> Result<Model, SceneError> {
+        Self::build_unlocated(scene, limits).map_err(|e| Locator::new(text).error(file, e))
     }
 
     /// Parse and build from scene text in one go.
@@ -89,8 +195,10 @@ impl Model {
         Self::build(&scene, text, file)
     }
 
-    fn build_unlocated(scene: &Scene) -> Result<Model, FieldError> {
+    fn build_unlocated(scene: &Scene, limits: &Limits) -> Result<Model, FieldError> {
+        check_names(scene)?;
         let grid = build_grid(scene)?;
+        let mut budget = Budget::new(scene, &grid, limits)?;
 
         let mut materials: Vec<Material> = Vec::new();
         if scene.materials.is_empty() {
@@ -145,14 +253,14 @@ impl Model {
                     format!(
                         "Young's modulus must be positive{}, got {}",
                         if explicit { " or zero" } else { "" },
-                        m.e
+                        number(m.e)
                     ),
                 ));
             }
             if !(m.nu > -1.0 && m.nu < 0.5) {
                 return Err(FieldError::new(
                     f("nu"),
-                    format!("Poisson's ratio must lie in (-1, 0.5), got {}", m.nu),
+                    format!("Poisson's ratio must lie in (-1, 0.5), got {}", number(m.nu)),
                 ));
             }
             if !(m.density >= 0.0 && m.density.is_finite()) {
@@ -204,11 +312,13 @@ impl Model {
                 return Err(FieldError::new(
                     f("region"),
                     format!(
-                        "the region [{:.4}, {:.4}] x [{:.4}, {:.4}] extends outside the grid [{:.4}, {:.4}] x [{:.4}, {:.4}]: its points would lie outside the grid",
-                        min[0], max[0], min[1], max[1], grid.origin[0], gmax[0], grid.origin[1], gmax[1]
+                        "the region [{}, {}] x [{}, {}] extends outside the grid [{}, {}] x [{}, {}]: its points would lie outside the grid",
+                        short(min[0]), short(max[0]), short(min[1]), short(max[1]),
+                        short(grid.origin[0]), short(gmax[0]), short(grid.origin[1]), short(gmax[1])
                     ),
                 ));
             }
+            budget.body(k, b, &region, &grid)?;
             let before = points.len();
             let density = materials[material].density();
             if b.placement == Placement::Polar {
@@ -286,7 +396,7 @@ impl Model {
                         axis: 0,
                         index: grid
                             .line_index(0, x)
-                            .ok_or_else(|| FieldError::new(f("x"), format!("x = {x} is not a grid line")))?,
+                            .ok_or_else(|| FieldError::new(f("x"), format!("x = {} is not a grid line", number(x))))?,
                     },
                     0,
                 ),
@@ -295,7 +405,7 @@ impl Model {
                         axis: 1,
                         index: grid
                             .line_index(1, y)
-                            .ok_or_else(|| FieldError::new(f("y"), format!("y = {y} is not a grid line")))?,
+                            .ok_or_else(|| FieldError::new(f("y"), format!("y = {} is not a grid line", number(y))))?,
                     },
                     1,
                 ),
@@ -305,7 +415,10 @@ impl Model {
                     }
                     let (i, j) = (grid.line_index(0, at[0]), grid.line_index(1, at[1]));
                     let (Some(i), Some(j)) = (i, j) else {
-                        return Err(FieldError::new(f("node"), format!("{at:?} is not a grid node")));
+                        return Err(FieldError::new(
+                            f("node"),
+                            format!("[{}, {}] is not a grid node", number(at[0]), number(at[1])),
+                        ));
                     };
                     (GridTarget::Node(grid.node(i, j)), 0)
                 }
@@ -354,7 +467,29 @@ impl Model {
             return Err(FieldError::new("loads.gravity", "must be finite"));
         }
         let mut point_loads = Vec::new();
+        if scene.loads.point.len() > MAX_POINT_LOADS {
+            return Err(FieldError::new(
+                "loads.point",
+                format!(
+                    "{} point loads are more than the {MAX_POINT_LOADS} supported",
+                    scene.loads.point.len()
+                ),
+            ));
+        }
+        if (scene.loads.point.len() as u128) * (points.len() as u128) > MAX_GENERATION_WORK {
+            return Err(FieldError::new(
+                "loads.point",
+                format!(
+                    "finding the nearest of {} points for each of {} point loads is more than the {MAX_GENERATION_WORK} tests allowed; use fewer point loads",
+                    points.len(),
+                    scene.loads.point.len()
+                ),
+            ));
+        }
         for (k, l) in scene.loads.point.iter().enumerate() {
+            if !l.at.iter().all(|v| v.is_finite()) {
+                return Err(FieldError::new(format!("loads.point[{k}].at"), "must be finite"));
+            }
             if !l.force.iter().all(|v| v.is_finite()) {
                 return Err(FieldError::new(format!("loads.point[{k}].force"), "must be finite"));
             }
@@ -380,6 +515,15 @@ impl Model {
         }
         if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
             return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
+        }
+        if a.dense_limit > MAX_DENSE_LIMIT {
+            return Err(FieldError::new(
+                "analysis.dense_limit",
+                format!("must be at most {MAX_DENSE_LIMIT}, got {}", a.dense_limit),
+            ));
+        }
+        if !a.blowup_factor.is_finite() {
+            return Err(FieldError::new("analysis.blowup_factor", "must be finite"));
         }
 
         let exact = match &scene.exact {
@@ -420,6 +564,28 @@ impl Model {
             Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
         };
 
+        // Tracking points of all boundaries, and vertices of all implicit
+        // boundaries, together.
+        let mut total = 0usize;
+        for (k, b) in scene.boundaries.iter().enumerate() {
+            total = total.saturating_add(b.points.as_ref().map_or(0, Vec::len));
+            if total > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    format!("boundary[{k}].points"),
+                    format!("the boundaries have more than the {MAX_CURVE_POINTS} tracking points supported in all"),
+                ));
+            }
+        }
+        let mut total = 0usize;
+        for (k, b) in scene.ibm.iter().enumerate() {
+            total = total.saturating_add(b.points.len());
+            if total > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    format!("ibm[{k}].points"),
+                    format!("the implicit boundaries have more than the {MAX_CURVE_POINTS} points supported in all"),
+                ));
+            }
+        }
         let mut boundaries: Vec<Boundary> = Vec::new();
         for (k, spec) in scene.boundaries.iter().enumerate() {
             if boundaries.iter().any(|b| b.name == spec.name) {
@@ -490,6 +656,16 @@ impl Model {
                     let s = boundaries[idx]
                         .spline(&points)
                         .map_err(|e| FieldError::new(f("boundary"), e.to_string()))?;
+                    if s.segments.len().saturating_mul(spec.per_segment) > MAX_CURVE_POINTS {
+                        return Err(FieldError::new(
+                            f("per_segment"),
+                            format!(
+                                "{} segments x {} chords are more than the {MAX_CURVE_POINTS} vertices a polyline may have",
+                                s.segments.len(),
+                                spec.per_segment
+                            ),
+                        ));
+                    }
                     (s.sample(spec.per_segment), Some((idx, spec.per_segment)))
                 }
                 (None, false) => (spec.points.clone(), None),
@@ -500,10 +676,53 @@ impl Model {
                     ))
                 }
             };
+            if spec.points.len() > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    f("points"),
+                    format!(
+                        "{} points are more than the {MAX_CURVE_POINTS} a polyline may have",
+                        spec.points.len()
+                    ),
+                ));
+            }
             if poly.len() < 2 || !poly.iter().flatten().all(|v| v.is_finite()) {
                 return Err(FieldError::new(
                     f("points"),
                     "a polyline needs at least 2 finite points",
+                ));
+            }
+            // The boundary's cells and its band must be cells of the grid.
+            let gmax = grid.max();
+            let tol = 1e-9 * grid.h;
+            if let Some((i, p)) = poly.iter().enumerate().find(|(_, p)| {
+                !(p[0] >= grid.origin[0] - tol
+                    && p[1] >= grid.origin[1] - tol
+                    && p[0] <= gmax[0] + tol
+                    && p[1] <= gmax[1] + tol)
+            }) {
+                let what = if spec.boundary.is_some() {
+                    format!(
+                        "the curve of boundary `{}`",
+                        spec.boundary.as_deref().unwrap_or_default()
+                    )
+                } else {
+                    format!("point {i}")
+                };
+                return Err(FieldError::new(
+                    if spec.boundary.is_some() {
+                        f("boundary")
+                    } else {
+                        f("points")
+                    },
+                    format!(
+                        "{what} at ({}, {}) lies outside the grid [{}, {}] x [{}, {}]",
+                        short(p[0]),
+                        short(p[1]),
+                        short(grid.origin[0]),
+                        short(gmax[0]),
+                        short(grid.origin[1]),
+                        short(gmax[1])
+                    ),
                 ));
             }
             if poly.windows(2).any(|w| w[0] == w[1]) {
@@ -520,7 +739,11 @@ impl Model {
                             "only for rollers; use `displacement`",
                         ));
                     }
-                    spec.displacement.unwrap_or([0.0; 2])
+                    let u = spec.displacement.unwrap_or([0.0; 2]);
+                    if !u.iter().all(|v| v.is_finite()) {
+                        return Err(FieldError::new(f("displacement"), "must be finite"));
+                    }
+                    u
                 }
                 DirichletKind::Roller => {
                     if spec.displacement.is_some() {
@@ -529,7 +752,11 @@ impl Model {
                             "only for fixed; use `normal_displacement`",
                         ));
                     }
-                    [spec.normal_displacement.unwrap_or(0.0), 0.0]
+                    let u = spec.normal_displacement.unwrap_or(0.0);
+                    if !u.is_finite() {
+                        return Err(FieldError::new(f("normal_displacement"), "must be finite"));
+                    }
+                    [u, 0.0]
                 }
             };
             if !(spec.fit_regularisation >= 0.0 && spec.fit_regularisation < 1.0) {
@@ -678,31 +905,46 @@ fn build_grid(scene: &Scene) -> Result<Grid, FieldError> {
     if !(g.h > 0.0 && g.h.is_finite()) {
         return Err(FieldError::new(
             "grid.h",
-            format!("the cell size must be positive, got {}", g.h),
+            format!("the cell size must be positive, got {}", number(g.h)),
         ));
     }
     if !g.origin.iter().all(|v| v.is_finite()) {
         return Err(FieldError::new("grid.origin", "must be finite"));
     }
+    if !g.size.iter().all(|v| v.is_finite()) {
+        return Err(FieldError::new("grid.size", "must be finite"));
+    }
+    // Cell counts stay floating point until they are known to be small.
+    let s = [g.size[0] / g.h, g.size[1] / g.h];
+    if s.iter().all(|s| s.is_finite() && *s >= 1.0 - 1e-9) && s[0] * s[1] > MAX_CELLS as f64 * (1.0 + 1e-9) {
+        return Err(FieldError::new(
+            "grid.h",
+            format!(
+                "a grid of size [{}, {}] with h = {} has {} x {} = {} cells, more than the {MAX_CELLS} supported; use a larger h",
+                number(g.size[0]),
+                number(g.size[1]),
+                number(g.h),
+                number(s[0].round()),
+                number(s[1].round()),
+                number(s[0].round() * s[1].round())
+            ),
+        ));
+    }
     let mut n = [0usize; 2];
     for d in 0..2 {
-        let s = g.size[d] / g.h;
+        let s = s[d];
         if !(s.is_finite() && s >= 1.0 - 1e-9) || (s - s.round()).abs() > 1e-9 * s.max(1.0) {
             return Err(FieldError::new(
                 "grid.size",
                 format!(
                     "must be a positive whole number of cells of size h = {}, got {} ({} cells)",
-                    g.h, g.size[d], s
+                    number(g.h),
+                    number(g.size[d]),
+                    number(s)
                 ),
             ));
         }
         n[d] = s.round() as usize;
-    }
-    if n[0].saturating_mul(n[1]) > MAX_CELLS {
-        return Err(FieldError::new(
-            "grid.size",
-            format!("{} x {} cells is more than the {MAX_CELLS} supported", n[0], n[1]),
-        ));
     }
     Ok(Grid {
         origin: g.origin,
@@ -712,12 +954,296 @@ fn build_grid(scene: &Scene) -> Result<Grid, FieldError> {
     })
 }
 
+/// A coordinate for a message: four decimals when that shows it, else
+/// [`number`].
+fn short(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 || (1e-3..1e9).contains(&a) {
+        format!("{x:.4}")
+    } else {
+        number(x)
+    }
+}
+
+/// What a scene may name, and where.
+fn check_name(field: &str, name: &str) -> Result<(), FieldError> {
+    if name.trim().is_empty() {
+        return Err(FieldError::new(field, "must not be empty"));
+    }
+    if name.chars().count() > MAX_NAME {
+        return Err(FieldError::new(
+            field,
+            format!(
+                "is {} characters long; names have at most {MAX_NAME}",
+                name.chars().count()
+            ),
+        ));
+    }
+    if name.chars().any(|c| c.is_control() || c == '/' || c == '\\') {
+        return Err(FieldError::new(
+            field,
+            "must not contain `/`, `\\` or control characters (names become recording paths)",
+        ));
+    }
+    Ok(())
+}
+
+/// Names are well-formed, and unique across materials, bodies, B-spline
+/// boundaries and implicit boundaries: a name refers to one thing.
+fn check_names(scene: &Scene) -> Result<(), FieldError> {
+    for (table, n, cap) in [
+        ("material", scene.materials.len(), MAX_ENTRIES),
+        ("body", scene.bodies.len(), MAX_ENTRIES),
+        ("boundary", scene.boundaries.len(), MAX_ENTRIES),
+        ("ibm", scene.ibm.len(), MAX_ENTRIES),
+        ("dirichlet", scene.dirichlet.len(), 10 * MAX_ENTRIES),
+    ] {
+        if n > cap {
+            return Err(FieldError::new(
+                format!("{table}[{cap}]"),
+                format!("{n} [[{table}]] entries are more than the {cap} supported"),
+            ));
+        }
+    }
+    check_name("scene.name", &scene.scene.name)?;
+    if scene.scene.name.starts_with('.') {
+        return Err(FieldError::new(
+            "scene.name",
+            "must not start with `.` (it names recording files)",
+        ));
+    }
+    let mut seen: std::collections::HashMap<&str, String> = std::collections::HashMap::new();
+    let named = scene
+        .materials
+        .iter()
+        .enumerate()
+        .map(|(k, m)| (format!("material[{k}]"), &m.name))
+        .chain(
+            scene
+                .bodies
+                .iter()
+                .enumerate()
+                .map(|(k, b)| (format!("body[{k}]"), &b.name)),
+        )
+        .chain(
+            scene
+                .boundaries
+                .iter()
+                .enumerate()
+                .map(|(k, b)| (format!("boundary[{k}]"), &b.name)),
+        )
+        .chain(
+            scene
+                .ibm
+                .iter()
+                .enumerate()
+                .map(|(k, b)| (format!("ibm[{k}]"), &b.name)),
+        );
+    for (at, name) in named {
+        let field = format!("{at}.name");
+        check_name(&field, name)?;
+        if let Some(first) = seen.get(name.as_str()) {
+            return Err(FieldError::new(
+                field,
+                format!("the name `{name}` is already used by {first}; names must be unique"),
+            ));
+        }
+        seen.insert(name.as_str(), at);
+    }
+    Ok(())
+}
+
+/// The memory estimate of a model, grown body by body before each body's
+/// points are generated, and the work of generating them.
+struct Budget {
+    max: u64,
+    grid_nodes: u128,
+    points: u128,
+    active: u128,
+    condition: crate::scene::ConditionMode,
+    dense_limit: u128,
+}
+
+impl Budget {
+    fn new(scene: &Scene, grid: &Grid, limits: &Limits) -> Result<Budget, FieldError> {
+        let b = Budget {
+            max: limits.max_memory,
+            grid_nodes: grid.num_nodes() as u128,
+            points: 0,
+            active: 0,
+            condition: scene.analysis.condition,
+            dense_limit: scene.analysis.dense_limit as u128,
+        };
+        b.check("grid.h".into(), "use a larger grid h or a smaller grid size")?;
+        Ok(b)
+    }
+
+    /// Bytes of a dense eigenproblem over the estimated unknowns (the
+    /// matrix, its eigenvectors and workspace).
+    fn dense(&self) -> u128 {
+        let dofs = 2 * self.active.min(self.grid_nodes);
+        let n = match self.condition {
+            crate::scene::ConditionMode::Dense => dofs,
+            crate::scene::ConditionMode::Auto => dofs.min(self.dense_limit),
+            _ => 0,
+        };
+        3 * 8 * n * n
+    }
+
+    fn total(&self) -> u128 {
+        self.grid_nodes * BYTES_PER_GRID_NODE as u128
+            + self.points * BYTES_PER_POINT as u128
+            + self.active.min(self.grid_nodes) * BYTES_PER_ACTIVE_NODE as u128
+            + self.dense()
+    }
+
+    fn check(&self, field: String, advice: &str) -> Result<(), FieldError> {
+        let total = self.total();
+        if total <= self.max as u128 {
+            return Ok(());
+        }
+        let dense = self.dense();
+        let points = self.points * BYTES_PER_POINT as u128;
+        // Name what dominates: dense eigenvalues, the points or the grid.
+        let (field, advice) = if dense >= points && dense * 2 >= total {
+            (
+                "analysis.condition".to_string(),
+                "use condition = \"lanczos\" or \"off\", or a smaller dense_limit",
+            )
+        } else if points * 2 >= total {
+            (field, advice)
+        } else {
+            ("grid.h".to_string(), "use a larger grid h")
+        };
+        Err(FieldError::new(
+            field,
+            format!(
+                "the model needs an estimated {} ({} points x {} + {} grid nodes x {} + {} active nodes x {}{}), more than the {} allowed (--max-memory; default half of the available memory); {advice}",
+                bytes(total.min(u64::MAX as u128) as u64),
+                self.points,
+                bytes(BYTES_PER_POINT),
+                self.grid_nodes,
+                bytes(BYTES_PER_GRID_NODE),
+                self.active.min(self.grid_nodes),
+                bytes(BYTES_PER_ACTIVE_NODE),
+                if dense > 0 {
+                    format!(" + dense eigenvalues {}", bytes(dense.min(u64::MAX as u128) as u64))
+                } else {
+                    String::new()
+                },
+                bytes(self.max)
+            ),
+        ))
+    }
+
+    /// Add body `k` (its region built): its points (an upper bound) and the
+    /// nodes its region's bounding box covers; refuse it when the counts
+    /// exceed the caps, the generation work is too large, or the estimate
+    /// exceeds the budget.
+    fn body(&mut self, k: usize, b: &BodySpec, region: &Region, grid: &Grid) -> Result<(), FieldError> {
+        let f = |n: &str| format!("body[{k}].{n}");
+        let (min, max) = region.bounds();
+        let h = grid.h;
+        let cells = |d: usize, nc: usize| -> u128 {
+            let lo = ((min[d] - grid.origin[d]) / h).floor().clamp(0.0, nc as f64);
+            let hi = ((max[d] - grid.origin[d]) / h).ceil().clamp(0.0, nc as f64);
+            (hi - lo).max(0.0) as u128
+        };
+        let (cx, cy) = (cells(0, grid.nx), cells(1, grid.ny));
+        let pieces = region.pieces.len().max(1) as u128;
+        let (count, field, advice, work) = match b.placement {
+            Placement::Polar => {
+                let (nr, nc) = (
+                    b.radial_points.unwrap_or(0) as u128,
+                    b.circumferential_points.unwrap_or(0) as u128,
+                );
+                (
+                    nr * nc,
+                    f("radial_points"),
+                    "use fewer radial_points or circumferential_points",
+                    0,
+                )
+            }
+            Placement::Lattice => {
+                let [nx, ny] = b.lattice.unwrap_or([0, 0]);
+                let n = nx as u128 * ny as u128;
+                let rectangle = matches!(b.region, RegionSpec::Rectangle { .. });
+                (
+                    n,
+                    f("lattice"),
+                    "use a coarser lattice",
+                    if rectangle { 0 } else { n * pieces },
+                )
+            }
+            _ => {
+                let n = b.points_per_cell as u128;
+                (
+                    cx * cy * n * n,
+                    f("points_per_cell"),
+                    "use fewer points_per_cell or a larger grid h",
+                    cx * cy * pieces,
+                )
+            }
+        };
+        if self.points + count > MAX_POINTS as u128 {
+            return Err(FieldError::new(
+                field,
+                format!(
+                    "this body would have up to {count} points{}, more than the {MAX_POINTS} a model may have; {advice}",
+                    if self.points > 0 { format!(" besides the {} before it", self.points) } else { String::new() }
+                ),
+            ));
+        }
+        if work > MAX_GENERATION_WORK {
+            return Err(FieldError::new(
+                f("region"),
+                format!(
+                    "placing points would test {} cells or lattice points against {pieces} region pieces, more than the {MAX_GENERATION_WORK} tests allowed; simplify the region or {advice}",
+                    work / pieces
+                ),
+            ));
+        }
+        self.points += count;
+        // GIMP domains reach one node row further each way.
+        self.active += (cx + 3) * (cy + 3);
+        self.check(field, advice)
+    }
+}
+
 fn build_exact(
     spec: &ExactSpec,
     materials: &[Material],
     bodies: &[Body],
     gravity: P2,
 ) -> Result<ExactSolution, FieldError> {
+    let values: Vec<f64> = match *spec {
+        ExactSpec::ColumnFinite { base, top } | ExactSpec::ColumnSelfWeight { base, top } => vec![base, top],
+        ExactSpec::UniaxialY { strain_yy, anchor } => vec![strain_yy, anchor[0], anchor[1]],
+        ExactSpec::ConfinedY {
+            stress_yy,
+            base,
+            angle_deg,
+            about,
+        } => vec![stress_yy, base, angle_deg, about[0], about[1]],
+        ExactSpec::ConfinedYFinite {
+            stretch,
+            base,
+            angle_deg,
+            about,
+        } => vec![stretch, base, angle_deg, about[0], about[1]],
+        ExactSpec::Lame {
+            pressure,
+            r_inner,
+            r_outer,
+            center,
+        } => vec![pressure, r_inner, r_outer, center[0], center[1]],
+        ExactSpec::Kirsch { stress, radius } => vec![stress, radius],
+        ExactSpec::SimpleShear { shear, x0 } => vec![shear, x0],
+        ExactSpec::FreeMotion {} => Vec::new(),
+    };
+    if !values.iter().all(|v| v.is_finite()) {
+        return Err(FieldError::new("exact", "parameters must be finite"));
+    }
     let material = materials[bodies[0].material].elastic;
     if bodies.iter().any(|b| materials[b.material].elastic != material) {
         return Err(FieldError::new(
@@ -933,7 +1459,7 @@ fn polar_points(b: &BodySpec, density: f64, body: usize, pts: &mut Points) -> Re
         "circumferential_points",
         "polar placement needs `circumferential_points`".to_string(),
     ))?;
-    if nr < 2 || nc < 2 || nr * nc > 10_000_000 {
+    if nr < 2 || nc < 2 || nr.checked_mul(nc).is_none_or(|n| n > MAX_POINTS) {
         return Err((
             "radial_points",
             "need at least 2 points each way (and not absurdly many)".into(),
@@ -984,7 +1510,7 @@ fn lattice_points(
     let [nx, ny] = b
         .lattice
         .ok_or(("lattice", "lattice placement needs `lattice = [nx, ny]`".to_string()))?;
-    if nx == 0 || ny == 0 || nx * ny > 10_000_000 {
+    if nx == 0 || ny == 0 || nx.checked_mul(ny).is_none_or(|n| n > MAX_POINTS) {
         return Err(("lattice", "point counts must be positive (and not absurd)".into()));
     }
     let rectangle = matches!(b.region, RegionSpec::Rectangle { .. });
@@ -1056,6 +1582,15 @@ fn build_boundary(
         .ok_or_else(|| FieldError::new(f("body"), format!("no body named `{}`", spec.body)))?;
     let idx: Vec<usize> = match (&spec.points, spec.layer) {
         (Some(list), None) => {
+            if list.len() > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    f("points"),
+                    format!(
+                        "{} points are more than the {MAX_CURVE_POINTS} a boundary may have",
+                        list.len()
+                    ),
+                ));
+            }
             let gmax = grid.max();
             let tol = 1e-9 * grid.h;
             let mut idx = Vec::new();

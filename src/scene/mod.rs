@@ -11,7 +11,9 @@
 mod error;
 pub mod region;
 
-pub use error::{from_toml, line_column, FieldError, Locator, SceneError};
+pub use error::{
+    from_toml, line_column, number, path_of_line, FieldError, Locator, SceneError, MAX_MAGNITUDE, MIN_MAGNITUDE,
+};
 pub use region::RegionSpec;
 
 use crate::basis::BasisKind;
@@ -561,23 +563,124 @@ pub enum ExactSpec {
     FreeMotion {},
 }
 
+/// Largest scene file read (bytes).
+pub const MAX_SCENE_BYTES: u64 = 4 << 20;
+
 impl Scene {
-    /// Parse scene text; `file` names it in errors.
+    /// Parse scene text; `file` names it in errors. Besides syntax, keys
+    /// and types, every real number must be finite and zero or of a
+    /// magnitude in [`MIN_MAGNITUDE`, `MAX_MAGNITUDE`].
     pub fn parse(text: &str, file: &str) -> Result<Scene, SceneError> {
-        toml::from_str(text).map_err(|e| from_toml(file, text, &e))
+        let scene: Scene = toml::from_str(text).map_err(|e| from_toml(file, text, &e))?;
+        let locator = Locator::new(text);
+        locator.check_numbers().map_err(|e| locator.error(file, e))?;
+        Ok(scene)
     }
 
     /// Read and parse a scene file.
     pub fn load(path: &Path) -> Result<(Scene, String), SceneError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
-            file: file.clone(),
-            line: 0,
-            column: 0,
-            field: "(file)".into(),
-            message: format!("cannot read: {e}"),
-        })?;
+        let text = read_scene_text(path)?;
         let scene = Scene::parse(&text, &file)?;
         Ok((scene, text))
+    }
+}
+
+/// The text of a scene file: a regular file (not a directory, FIFO or
+/// device, which could block or never end) of at most [`MAX_SCENE_BYTES`],
+/// in UTF-8 (the first invalid byte is located).
+pub fn read_scene_text(path: &Path) -> Result<String, SceneError> {
+    let file = path.display().to_string();
+    let fail = |line: usize, column: usize, field: &str, message: String| SceneError {
+        file: file.clone(),
+        line,
+        column,
+        field: field.into(),
+        message,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| fail(0, 0, "(file)", format!("cannot read: {}", io_reason(&e))))?;
+    if meta.is_dir() {
+        return Err(fail(0, 0, "(file)", "is a directory, not a scene file".into()));
+    }
+    if !meta.is_file() {
+        return Err(fail(
+            0,
+            0,
+            "(file)",
+            format!("is not a regular file ({}); give a scene file", file_kind(&meta)),
+        ));
+    }
+    if meta.len() > MAX_SCENE_BYTES {
+        return Err(fail(
+            0,
+            0,
+            "(file)",
+            format!(
+                "is {} bytes; scene files are limited to {} bytes",
+                meta.len(),
+                MAX_SCENE_BYTES
+            ),
+        ));
+    }
+    use std::io::Read as _;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_SCENE_BYTES + 1).read_to_end(&mut bytes))
+        .map_err(|e| fail(0, 0, "(file)", format!("cannot read: {}", io_reason(&e))))?;
+    if bytes.len() as u64 > MAX_SCENE_BYTES {
+        return Err(fail(
+            0,
+            0,
+            "(file)",
+            format!("is larger than the {MAX_SCENE_BYTES} bytes scene files are limited to"),
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let valid = std::str::from_utf8(&e.as_bytes()[..at]).unwrap_or_default();
+        let (line, column) = line_column(valid, at);
+        let field = error::path_of_line(valid, line);
+        fail(
+            line,
+            column,
+            if field.is_empty() { "(top level)" } else { &field },
+            format!(
+                "the file is not UTF-8 text (byte 0x{:02X} at offset {at}); scene files are TOML text",
+                e.as_bytes()[at]
+            ),
+        )
+    })
+}
+
+/// What a file that is not a regular file is.
+fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt as _;
+    let t = meta.file_type();
+    if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// An I/O error in words, without the `(os error N)` suffix.
+pub fn io_reason(e: &std::io::Error) -> String {
+    use std::io::ErrorKind as K;
+    match e.kind() {
+        K::NotFound => "no such file or directory".into(),
+        K::PermissionDenied => "permission denied".into(),
+        K::IsADirectory => "is a directory".into(),
+        K::StorageFull => "no space left on the device".into(),
+        K::ReadOnlyFilesystem => "the file system is read-only".into(),
+        _ => {
+            let s = e.to_string();
+            s.split(" (os error").next().unwrap_or(&s).to_string()
+        }
     }
 }

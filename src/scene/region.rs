@@ -8,7 +8,7 @@
 //! subtract = [{ shape = "circle", center = [0.0, 0.0], radius = 0.5 }]
 //! ```
 
-use super::FieldError;
+use super::{number, FieldError};
 use crate::boundary::bspline::BSpline;
 use crate::geometry::{self, chords_for, Region, P2};
 use serde::Deserialize;
@@ -86,6 +86,106 @@ fn yes() -> bool {
     true
 }
 
+/// Most vertices of one polygon, after curves are flattened to chords (the
+/// self-intersection test and the triangulation grow with its square).
+pub const MAX_VERTICES: usize = 10_000;
+/// Most pieces (convex polygons with a sign) a region may have after its
+/// unions and differences are expanded: `A u B` has up to
+/// `|A| + |B| + |A| |B|` of them.
+pub const MAX_PIECES: usize = 20_000;
+/// Most parts of a union or subtracted regions of a difference.
+pub const MAX_PARTS: usize = 1_000;
+/// Most chords per spline segment.
+pub const MAX_PER_SEGMENT: usize = 1_024;
+
+/// Chords for an arc of radius `r` sweeping `sweep` radians within chord
+/// error `tol`, at most [`MAX_VERTICES`]; `field` names the tolerance.
+fn chord_count(r: f64, tol: f64, sweep: f64, field: &str, given: bool) -> Result<usize, FieldError> {
+    if !(tol > 0.0 && tol.is_finite()) {
+        return Err(FieldError::new(field, format!("must be positive, got {}", number(tol))));
+    }
+    // chords_for in floating point, before any conversion to a count.
+    let t = (1.0 - (tol / r).min(1.0)).clamp(-1.0, 1.0);
+    let n = sweep / (2.0 * t.acos());
+    if !(n <= MAX_VERTICES as f64) {
+        // Chord error r (1 - cos(a/2)) with a = sweep / MAX_VERTICES.
+        let least = r * (1.0 - (0.5 * sweep / MAX_VERTICES as f64).cos());
+        return Err(FieldError::new(
+            field,
+            format!(
+                "{} needs more than {MAX_VERTICES} chords for radius {}; use a tolerance of at least {}",
+                if given {
+                    format!("tolerance {}", number(tol))
+                } else {
+                    "the default tolerance".into()
+                },
+                number(r),
+                number(least * 1.01)
+            ),
+        ));
+    }
+    Ok(chords_for(r, tol, sweep))
+}
+
+/// Refuse a boolean combination whose expansion would exceed [`MAX_PIECES`].
+fn check_pieces(a: &Region, b: &Region, field: &str) -> Result<(), FieldError> {
+    let (na, nb) = (a.pieces.len() as u128, b.pieces.len() as u128);
+    if na + nb + na * nb > MAX_PIECES as u128 {
+        return Err(FieldError::new(
+            field,
+            format!(
+                "combining regions of {na} and {nb} convex pieces may need up to {} pieces, more than the {MAX_PIECES} supported; use fewer or simpler parts",
+                na + nb + na * nb
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A vertex lying on an edge it does not belong to (a figure eight, a
+/// spike back along an edge): the polygon is not simple although no two
+/// edges cross properly.
+fn touches_itself(poly: &[P2]) -> Option<usize> {
+    let n = poly.len();
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in poly {
+        for d in 0..2 {
+            lo[d] = lo[d].min(p[d]);
+            hi[d] = hi[d].max(p[d]);
+        }
+    }
+    let tol = 1e-12 * (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+    for (i, v) in poly.iter().enumerate() {
+        for j in 0..n {
+            let k = (j + 1) % n;
+            if j == i || k == i {
+                continue;
+            }
+            let (a, b) = (poly[j], poly[k]);
+            // Quick rejection by the edge's box.
+            if v[0] < a[0].min(b[0]) - tol
+                || v[0] > a[0].max(b[0]) + tol
+                || v[1] < a[1].min(b[1]) - tol
+                || v[1] > a[1].max(b[1]) + tol
+            {
+                continue;
+            }
+            let e = [b[0] - a[0], b[1] - a[1]];
+            let len2 = e[0] * e[0] + e[1] * e[1];
+            let t = if len2 > 0.0 {
+                (((v[0] - a[0]) * e[0] + (v[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = (v[0] - a[0] - t * e[0]).hypot(v[1] - a[1] - t * e[1]);
+            if d <= tol {
+                return Some(i);
+            }
+        }
+    }
+    None
+}
+
 fn finite(field: &str, v: &[f64]) -> Result<(), FieldError> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
@@ -111,11 +211,37 @@ impl RegionSpec {
                 if vertices.len() < 3 {
                     return Err(FieldError::new(f("vertices"), "a polygon needs at least 3 vertices"));
                 }
+                if vertices.len() > MAX_VERTICES {
+                    return Err(FieldError::new(
+                        f("vertices"),
+                        format!(
+                            "{} vertices are more than the {MAX_VERTICES} a polygon may have",
+                            vertices.len()
+                        ),
+                    ));
+                }
                 finite(&f("vertices"), &vertices.concat())?;
                 if geometry::self_intersects(vertices) {
                     return Err(FieldError::new(f("vertices"), "the polygon crosses itself"));
                 }
                 let poly = geometry::ccw(geometry::drop_collinear(vertices));
+                // Dropping collinear vertices can turn a crossing through a
+                // shared vertex into a proper one.
+                if geometry::self_intersects(&poly) {
+                    return Err(FieldError::new(f("vertices"), "the polygon crosses itself"));
+                }
+                // A vertex on another edge first: a bowtie whose crossing is a
+                // vertex has zero area but is really a self-touching outline.
+                if let Some(i) = touches_itself(&poly).filter(|_| poly.len() > 3) {
+                    return Err(FieldError::new(
+                        f("vertices"),
+                        format!(
+                            "the polygon touches itself at ({}, {}): a vertex lies on another edge",
+                            number(poly[i][0]),
+                            number(poly[i][1])
+                        ),
+                    ));
+                }
                 if geometry::area_centroid(&poly).0 <= 0.0 {
                     return Err(FieldError::new(f("vertices"), "the polygon has zero area"));
                 }
@@ -141,10 +267,13 @@ impl RegionSpec {
                     return Err(FieldError::new(f("radius"), "must be positive"));
                 }
                 let tol = tolerance.unwrap_or(radius * 1e-4);
-                if !(tol > 0.0) {
-                    return Err(FieldError::new(f("tolerance"), "must be positive"));
-                }
-                let n = chords_for(*radius, tol, std::f64::consts::TAU);
+                let n = chord_count(
+                    *radius,
+                    tol,
+                    std::f64::consts::TAU,
+                    &f("tolerance"),
+                    tolerance.is_some(),
+                )?;
                 let poly = (0..n)
                     .map(|k| {
                         let t = std::f64::consts::TAU * k as f64 / n as f64;
@@ -168,12 +297,14 @@ impl RegionSpec {
                 if !(r_outer > r_inner && r_outer.is_finite()) {
                     return Err(FieldError::new(f("r_outer"), "must exceed `r_inner`"));
                 }
+                finite(&f("start_deg"), &[*start_deg])?;
+                finite(&f("end_deg"), &[*end_deg])?;
                 let sweep = (end_deg - start_deg).to_radians();
                 if !(sweep > 0.0 && sweep <= std::f64::consts::TAU + 1e-12) {
                     return Err(FieldError::new(f("end_deg"), "must exceed `start_deg` by at most 360"));
                 }
                 let tol = tolerance.unwrap_or(r_outer * 1e-4);
-                let n = chords_for(*r_outer, tol, sweep).max(2);
+                let n = chord_count(*r_outer, tol, sweep, &f("tolerance"), tolerance.is_some())?.max(2);
                 let at = |r: f64, k: usize| {
                     let t = start_deg.to_radians() + sweep * k as f64 / n as f64;
                     [center[0] + r * t.cos(), center[1] + r * t.sin()]
@@ -203,6 +334,23 @@ impl RegionSpec {
                 per_segment,
             } => {
                 finite(&f("points"), &points.concat())?;
+                let per = per_segment.unwrap_or(64);
+                if !(1..=MAX_PER_SEGMENT).contains(&per) {
+                    return Err(FieldError::new(
+                        f("per_segment"),
+                        format!("must be between 1 and {MAX_PER_SEGMENT}, got {per}"),
+                    ));
+                }
+                let vertices = (points.len() as u128 + 1) * per as u128 + close_via.len() as u128;
+                if vertices > MAX_VERTICES as u128 {
+                    return Err(FieldError::new(
+                        if per_segment.is_some() { f("per_segment") } else { f("points") },
+                        format!(
+                            "{} points at {per} chords per segment make about {vertices} vertices, more than the {MAX_VERTICES} a polygon may have",
+                            points.len()
+                        ),
+                    ));
+                }
                 let mut marks = vec![false; points.len()];
                 for &c in corners {
                     *marks
@@ -211,7 +359,7 @@ impl RegionSpec {
                 }
                 let spline = BSpline::interpolate(points, *closed, &marks)
                     .map_err(|e| FieldError::new(f("points"), e.to_string()))?;
-                let mut poly = spline.sample(per_segment.unwrap_or(64).max(1));
+                let mut poly = spline.sample(per);
                 if *closed {
                     poly.pop(); // the last sample repeats the first
                 } else {
@@ -224,16 +372,37 @@ impl RegionSpec {
                 if parts.is_empty() {
                     return Err(FieldError::new(f("parts"), "a union needs at least one part"));
                 }
+                if parts.len() > MAX_PARTS {
+                    return Err(FieldError::new(
+                        f("parts"),
+                        format!("{} parts are more than the {MAX_PARTS} a union may have", parts.len()),
+                    ));
+                }
                 let mut r = parts[0].build(&format!("{path}.parts[0]"))?;
                 for (k, p) in parts.iter().enumerate().skip(1) {
-                    r = r.union(&p.build(&format!("{path}.parts[{k}]"))?);
+                    let field = format!("{path}.parts[{k}]");
+                    let q = p.build(&field)?;
+                    check_pieces(&r, &q, &field)?;
+                    r = r.union(&q);
                 }
                 Ok(r)
             }
             RegionSpec::Difference { base, subtract } => {
+                if subtract.len() > MAX_PARTS {
+                    return Err(FieldError::new(
+                        f("subtract"),
+                        format!(
+                            "{} regions are more than the {MAX_PARTS} a difference may subtract",
+                            subtract.len()
+                        ),
+                    ));
+                }
                 let mut r = base.build(&f("base"))?;
                 for (k, p) in subtract.iter().enumerate() {
-                    r = r.difference(&p.build(&format!("{path}.subtract[{k}]"))?);
+                    let field = format!("{path}.subtract[{k}]");
+                    let q = p.build(&field)?;
+                    check_pieces(&r, &q, &field)?;
+                    r = r.difference(&q);
                 }
                 Ok(r)
             }

@@ -54,9 +54,13 @@ pub fn pending(folder: &Folder, runs: &[Run]) -> Vec<Run> {
     runs.iter().filter(|r| !done.contains_key(&r.id)).cloned().collect()
 }
 
-/// The command that runs one run.
+/// The command that runs one run, with absolute paths so that it runs
+/// from any working directory.
 fn command_line(exe: &Path, folder: &Folder, id: &str) -> String {
-    let q = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', "'\\''"));
+    let q = |p: &Path| {
+        let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        format!("'{}'", p.display().to_string().replace('\'', "'\\''"))
+    };
     format!(
         "{} sweep-run {} --result {}",
         q(exe),
