@@ -4,6 +4,19 @@
 //! and the tangent blocks of the point groups, `sum_p V0 G_a : A : G_b`
 //! (with `G_a[l] = e_l (x) grad S_a`, or the implicit boundary's
 //! [`GradOp`] for points inside a band).
+//!
+//! With F-bar (`analysis.fbar`, against volumetric locking in nearly
+//! incompressible plastic flow; de Souza Neto et al. 1996, as used in
+//! implicit MPM by Coombs et al. 2018) each point group (the points of one
+//! cell under the standard basis) is a patch: `dF_bar_p = c_p dF_p` with
+//! `c_p = (J_bar / J_p)^(1/2)` (plane strain), `J_p = det dF_p` and `J_bar`
+//! the patch's mean of `J` weighted by the start-of-step volumes. The
+//! stress comes from `dF_bar`, the geometry from `dF`:
+//! `P_p = tau(dF_bar_p) dF_p^-T = c_p P_bar_p`. Its tangent couples the
+//! points of a patch: `dP_p = c_p^2 A_p : dF_p + dc_p Q_p` with
+//! `Q_p = P_bar_p + c_p A_p : dF_p` and
+//! `dc_p = (c_p/2) (sum_q v_q J_q dF_q^-T : d dF_q / (J_bar V) - dF_p^-T : d dF_p)`.
+//! Points inside an implicit boundary's band stay out of the patches.
 
 use crate::assembly::{Dof, Mapping, Pattern};
 use crate::geometry::P2;
@@ -15,11 +28,31 @@ use crate::state::Simulation;
 use faer::sparse::SparseColMat;
 use nalgebra::Matrix2;
 
+/// F-bar at one trial increment: per point its data (points in a patch),
+/// per group `(J_bar, sum of start-of-step volumes)`.
+type FbarPatches = (Vec<Option<FbarPoint>>, Vec<(f64, f64)>);
+
+/// A point's F-bar data at one trial increment.
+#[derive(Clone, Debug)]
+pub(crate) struct FbarPoint {
+    /// `c = (J_bar / J)^(1/2)`.
+    c: f64,
+    /// `J = det dF`.
+    j: f64,
+    /// `dF^-T`.
+    finv_t: Matrix2<f64>,
+    /// `Q = P_bar + c A : dF`.
+    q: Matrix2<f64>,
+}
+
 /// The points' response at one trial increment.
 pub(crate) struct Iterate {
     pub(crate) responses: Vec<Option<Response>>,
     pub(crate) fint_free: Vec<f64>,
     pub(crate) fint_fixed: Vec<f64>,
+    /// With F-bar: per point its data (points in a patch), per group
+    /// `(J_bar, sum of start-of-step volumes)`.
+    fbar: Option<FbarPatches>,
 }
 
 /// The implicit boundaries as the points see them: per point its band
@@ -31,11 +64,41 @@ pub(crate) type BandView<'a> = (&'a [Option<Vec<GradOp>>], &'a [P2], &'a [P2]);
 /// `ops` acting on the unknowns `d` (and `grad(S d^a)`).
 pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band: Option<BandView>) -> Iterate {
     let pts = &sim.state.points;
+    let in_band = |p: usize| band.is_some_and(|(ops, _, _)| ops[p].is_some());
+    // F-bar: each group's volume-weighted mean J of its points' dF.
+    let fbar = sim.model.analysis.fbar.then(|| {
+        let mut c = vec![None; pts.len()];
+        let groups: Vec<(f64, f64)> = map
+            .groups
+            .iter()
+            .map(|g| {
+                let (mut sj, mut sv) = (0.0, 0.0);
+                let members: Vec<(usize, f64)> = g
+                    .points
+                    .iter()
+                    .filter(|&&p| pts.vol0[p] > 0.0 && !in_band(p))
+                    .map(|&p| (p, increment_gradient(&map.stencils[p], total).determinant()))
+                    .collect();
+                for &(p, j) in &members {
+                    sj += pts.vol[p] * j;
+                    sv += pts.vol[p];
+                }
+                let jbar = if sv > 0.0 { sj / sv } else { 1.0 };
+                for (p, j) in members {
+                    c[p] = Some((jbar / j).sqrt());
+                }
+                (jbar, sv)
+            })
+            .collect();
+        (c, groups)
+    });
     let mut it = Iterate {
         responses: Vec::with_capacity(pts.len()),
         fint_free: vec![0.0; map.dofs.n_free],
         fint_fixed: vec![0.0; map.dofs.constrained.len()],
+        fbar: fbar.as_ref().map(|(_, g)| (vec![None; pts.len()], g.clone())),
     };
+    let mut fbar_points: Vec<Option<FbarPoint>> = vec![None; if fbar.is_some() { pts.len() } else { 0 }];
     let mut add = |n: usize, i: usize, f: f64| match map.dofs.node_dof[n][i] {
         Dof::Free(k) => it.fint_free[k] += f,
         Dof::Fixed(k) => it.fint_fixed[k] += f,
@@ -50,17 +113,47 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
         let v0 = pts.vol0[p];
         let ops = band.and_then(|(ops, d, da)| ops[p].as_ref().map(|o| (o, d, da)));
         let r = match ops {
-            None => {
-                let r = sim
-                    .hencky(p)
-                    .respond(&increment_gradient(st, total), &be_matrix(pts.b_e[p]));
-                for (n, _, g) in st.iter() {
-                    for i in 0..2 {
-                        add(n, i, (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * v0);
+            None => match fbar.as_ref().and_then(|(c, _)| c[p]) {
+                None => {
+                    let r = sim
+                        .hencky(p)
+                        .respond(&increment_gradient(st, total), &be_matrix(pts.b_e[p]));
+                    for (n, _, g) in st.iter() {
+                        for i in 0..2 {
+                            add(n, i, (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * v0);
+                        }
                     }
+                    r
                 }
-                r
-            }
+                Some(c) => {
+                    let df = increment_gradient(st, total);
+                    let r = sim.hencky(p).respond(&(df * c), &be_matrix(pts.b_e[p]));
+                    // P = tau(dF_bar) dF^-T = c P_bar.
+                    let pm = r.p * c;
+                    for (n, _, g) in st.iter() {
+                        for i in 0..2 {
+                            add(n, i, (pm[(i, 0)] * g[0] + pm[(i, 1)] * g[1]) * v0);
+                        }
+                    }
+                    let mut q = r.p;
+                    for i in 0..2 {
+                        for j in 0..2 {
+                            for k in 0..2 {
+                                for l in 0..2 {
+                                    q[(i, j)] += c * r.a[i][j][k][l] * df[(k, l)];
+                                }
+                            }
+                        }
+                    }
+                    fbar_points[p] = Some(FbarPoint {
+                        c,
+                        j: df.determinant(),
+                        finv_t: df.try_inverse().map_or(Matrix2::zeros(), |m| m.transpose()),
+                        q,
+                    });
+                    r
+                }
+            },
             Some((ops, d, da)) => {
                 let ga = st.gradient(|n| da[n]);
                 let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
@@ -90,6 +183,9 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
         };
         it.responses.push(Some(r));
     }
+    if let Some((f, _)) = it.fbar.as_mut() {
+        *f = fbar_points;
+    }
     it
 }
 
@@ -113,6 +209,24 @@ pub(crate) fn group_tangent(
     let m2 = 2 * g.nodes.len();
     out.clear();
     out.resize(m2 * m2, 0.0);
+    let pts = &sim.state.points;
+    // F-bar: h_q(b, k) = (dF_q^-T grad S_b)_k, and the patch's
+    // H(b, k) = sum_q v_q J_q h_q(b, k) / (J_bar V).
+    let fbar = it.fbar.as_ref().map(|(f, groups)| {
+        let (jbar, vsum) = groups[b];
+        let mut big_h = vec![0.0; m2];
+        for &q in &g.points {
+            let Some(fq) = &f[q] else { continue };
+            let st = &map.stencils[q];
+            for bb in 0..st.len {
+                let h = fq.finv_t * nalgebra::Vector2::new(st.dw[bb][0], st.dw[bb][1]);
+                for k in 0..2 {
+                    big_h[2 * bb + k] += pts.vol[q] * fq.j * h[k] / (jbar * vsum);
+                }
+            }
+        }
+        (f, big_h)
+    });
     for &p in &g.points {
         let Some(r) = &it.responses[p] else { continue };
         let st = &map.stencils[p];
@@ -150,6 +264,8 @@ pub(crate) fn group_tangent(
             }
             continue;
         }
+        let fp = fbar.as_ref().and_then(|(f, h)| f[p].as_ref().map(|fp| (fp, h)));
+        let scale = fp.map_or(1.0, |(fp, _)| fp.c * fp.c);
         for a in 0..st.len {
             let ga = st.dw[a];
             for bb in 0..st.len {
@@ -162,7 +278,24 @@ pub(crate) fn group_tangent(
                                 s += r.a[i][j][k][l] * ga[j] * gb[l];
                             }
                         }
-                        out[(2 * a + i) * m2 + 2 * bb + k] += v0 * s;
+                        out[(2 * a + i) * m2 + 2 * bb + k] += v0 * scale * s;
+                    }
+                }
+            }
+        }
+        // F-bar: the patch coupling dc_p Q_p.
+        if let Some((fp, big_h)) = fp {
+            let hp: Vec<f64> = (0..st.len)
+                .flat_map(|bb| {
+                    let h = fp.finv_t * nalgebra::Vector2::new(st.dw[bb][0], st.dw[bb][1]);
+                    [h[0], h[1]]
+                })
+                .collect();
+            for a in 0..st.len {
+                let qa = fp.q * nalgebra::Vector2::new(st.dw[a][0], st.dw[a][1]);
+                for l in 0..2 {
+                    for col in 0..m2 {
+                        out[(2 * a + l) * m2 + col] += v0 * qa[l] * 0.5 * fp.c * (big_h[col] - hp[col]);
                     }
                 }
             }

@@ -33,21 +33,12 @@ use crate::linalg::{self, Condition, ConditionMethod, Factor};
 use crate::material::hencky::Response;
 use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
-use crate::state::Simulation;
-use faer::sparse::linalg::solvers::SymbolicLlt;
+use crate::state::{MassCache, Simulation};
 use faer::sparse::SparseColMat;
 use nalgebra::Matrix2;
 use std::time::Instant;
 
 pub use crate::report::{Conditioning, DynamicsReport};
-
-/// The mass pattern and symbolic Cholesky of the last step, reused while
-/// the assembly blocks (point groups and ghost faces) stay the same.
-#[derive(Default)]
-pub(crate) struct MassCache {
-    key: Vec<Vec<usize>>,
-    pattern: Option<(Pattern, SymbolicLlt<usize>)>,
-}
 
 /// A factorised mass matrix on the free dofs.
 enum MassSolver {

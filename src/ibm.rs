@@ -18,7 +18,6 @@
 //! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`
 //! (over the points, and `(B_bar - B)^T` over the band for the same reason).
 
-use crate::assembly::{Dof, DofMap};
 use crate::basis::{stencil, BasisKind, Stencil};
 use crate::exact::ExactSolution;
 use crate::geometry::P2;
@@ -672,7 +671,8 @@ impl IbmStep<'_> {
     }
 
     /// Reports of the boundaries after a step, and the work their reactions
-    /// did in it (trapezoidal).
+    /// did in it (trapezoidal). `free(node, component)` tells which dofs
+    /// are unknowns of the step.
     ///
     /// `residual0` and `residual` are the out-of-balance of the material
     /// (internal minus every external force, per node) at the start and the
@@ -684,7 +684,7 @@ impl IbmStep<'_> {
     pub fn reports(
         &self,
         grid: &Grid,
-        dofs: &DofMap,
+        free: &dyn Fn(usize, usize) -> bool,
         residual0: &[P2],
         residual: &[P2],
         nodal_d: &[P2],
@@ -706,7 +706,6 @@ impl IbmStep<'_> {
                 (cells, nodes)
             })
             .collect();
-        let free = |n: usize, c: usize| matches!(dofs.node_dof[n][c], Dof::Free(_));
         // Work of the reactions: trapezoidal on the increments of the free
         // dofs of the cut cells' nodes (grid-prescribed dofs count their
         // reactions' work with the other grid constraints; elsewhere the

@@ -400,7 +400,7 @@ fn point_ibm_reports(
     }
     s.reports(
         grid,
-        &map.dofs,
+        &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
         &residual0,
         &residual,
         nodal_d,

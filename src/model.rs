@@ -516,6 +516,12 @@ impl Model {
         if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
             return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
         }
+        if a.fbar && a.kind != crate::scene::AnalysisKind::QuasiStaticFinite {
+            return Err(FieldError::new(
+                "analysis.fbar",
+                "F-bar modifies the finite-deformation (Newton) path only: kind = \"quasi-static-finite\"",
+            ));
+        }
         if a.dense_limit > MAX_DENSE_LIMIT {
             return Err(FieldError::new(
                 "analysis.dense_limit",

@@ -431,39 +431,114 @@ impl<'a> Setup<'a> {
     }
 }
 
+/// One finite-deformation load step: each phase is a function below.
 pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let steps = sim.load_steps();
     let (lambda0, lambda1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
     let start = Instant::now();
     let mut timings = Timings::default();
-    let params = sim.params.clone();
 
-    // 1. Map points and collect the step's contributions.
+    // 1. Map the points and collect every method's contribution; the loads
+    //    at the start of the step (for the work) and the boundaries then.
     let ibm_now = sim.ibm_boundaries_now(step)?;
     let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1)?;
-    let map = &setup.map;
-    // Loads at the start of the step (for the work's trapezoidal rule) and
-    // each boundary as it is then.
-    let (forces, boundaries) = sim.nodal_forces(map, step, lambda1)?;
+    let (start_loads, boundaries) = sim.nodal_forces(&setup.map, step, lambda1)?;
     timings.assembly += start.elapsed().as_secs_f64();
+    // 2. Newton on the nodal unknowns.
+    let solved = newton(&setup, &mut timings)?;
+    // 3. Condition numbers of the last tangent.
+    let t = Instant::now();
+    let (condition, condition_unstabilised) = conditioning(&setup, &solved)?;
+    timings.condition = t.elapsed().as_secs_f64();
+    // 4. The points' new state, the work of loads and supports, and the
+    //    implicit boundaries' reactions.
+    let t = Instant::now();
+    let updated = update(&setup, &solved, &start_loads)?;
+    timings.update = t.elapsed().as_secs_f64();
+    // 5. Commit and report.
+    let faces = setup.faces.clone();
+    let map = &setup.map;
+    let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
+    drop(setup);
+    let active_cells = active.len();
+    let work = updated.work;
+    sim.commit_quasi_static(
+        updated.points,
+        step,
+        work,
+        active,
+        &faces,
+        solved.iterations,
+        lambda1 - lambda0,
+    );
+    let errors = match &sim.model.exact {
+        Some(e) => e.errors(&sim.state.points, lambda1),
+        None => Vec::new(),
+    };
+    timings.total = start.elapsed().as_secs_f64();
+    Ok(StepReport {
+        step,
+        load_steps: steps,
+        load_factor: lambda1,
+        unknowns: n_free,
+        active_nodes,
+        active_cells,
+        residual_norm: norm(&solved.res.fext),
+        residuals: solved.residuals,
+        timings,
+        energy: Energy {
+            strain: updated.strain_energy,
+            external_work: sim.state.external_work,
+            plastic_dissipation: updated.dissipation,
+            kinetic: 0.0,
+        },
+        condition,
+        condition_unstabilised,
+        iterations: solved.iterations,
+        ghost_faces: faces.len(),
+        ibm: updated.ibm,
+        errors,
+        max_increment: updated.max_increment,
+        boundaries,
+        dynamics: None,
+    })
+}
 
-    // 2. Newton.
+/// A converged Newton solve.
+struct Solved {
+    /// The nodal unknowns `d` (grid-prescribed components included).
+    d: Vec<P2>,
+    /// The residual and the points' response at `d`.
+    res: Residual,
+    /// Relative residual of every iteration.
+    residuals: Vec<f64>,
+    iterations: usize,
+    /// The last tangent and its LU factor (for the condition number).
+    last: Option<(SparseColMat<usize, f64>, linalg::LuFactor)>,
+}
+
+/// Newton-Raphson on the step's residual: tangent, sparse LU (symbolic
+/// analysis reused), full correction, until the relative residual is below
+/// the tolerance.
+fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
+    let (sim, step, map) = (setup.sim, setup.step, &setup.map);
+    let params = &sim.params;
     let mut d = vec![[0.0; 2]; sim.model.grid.num_nodes()];
     for &(n, c, v) in &map.dofs.constrained {
         d[n][c] = v;
     }
     let mut residuals = Vec::new();
     let mut symbolic = None;
-    // The last tangent and its LU factor, reused for the condition number.
     let mut last = None;
     let mut iterations = 0;
-    let res = loop {
-        let t = Instant::now();
-        let res = setup.residual(&d)?;
-        let rel = norm(&res.r) / if res.scale > 0.0 { res.scale } else { 1.0 };
+    let relative = |res: &Residual| norm(&res.r) / if res.scale > 0.0 { res.scale } else { 1.0 };
+    let t = Instant::now();
+    let mut res = setup.residual(&d)?;
+    timings.assembly += t.elapsed().as_secs_f64();
+    loop {
+        let rel = relative(&res);
         residuals.push(rel);
-        timings.assembly += t.elapsed().as_secs_f64();
         if !sim.report_progress(step, iterations, rel) {
             return Err(StepFailure::Cancelled { step, residuals });
         }
@@ -475,7 +550,13 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             });
         }
         if rel <= params.tolerance {
-            break res;
+            return Ok(Solved {
+                d,
+                res,
+                residuals,
+                iterations,
+                last,
+            });
         }
         if iterations >= params.max_iterations {
             return Err(StepFailure::NotConverged {
@@ -511,6 +592,8 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
                 ),
             });
         }
+        // The full correction; its residual opens the next iteration.
+        let t = Instant::now();
         for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
             for c in 0..2 {
                 if let Dof::Free(i) = dofs[c] {
@@ -518,31 +601,53 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
                 }
             }
         }
+        res = setup.residual(&d)?;
+        timings.assembly += t.elapsed().as_secs_f64();
         last = Some((k, lu));
         iterations += 1;
-    };
+    }
+}
 
-    // Condition numbers of the last tangent, with and without ghost.
-    let t = Instant::now();
-    let (condition, condition_unstabilised) = if params.condition == ConditionMode::Off || map.dofs.n_free == 0 {
-        (None, None)
+/// Condition numbers of the last tangent, with and without the ghost term
+/// (1-norm estimates through the LU factor).
+fn conditioning(setup: &Setup, solved: &Solved) -> Result<(Option<Condition>, Option<Condition>), StepFailure> {
+    if setup.sim.params.condition == ConditionMode::Off || setup.map.dofs.n_free == 0 {
+        return Ok((None, None));
+    }
+    let with = match &solved.last {
+        Some((k, lu)) => linalg::one_norm_condition(k, lu),
+        None => condition_of(&setup.tangent(&solved.res, &solved.d, setup.gamma)?),
+    };
+    let without = if setup.faces.is_empty() {
+        None
     } else {
-        let with = match &last {
-            Some((k, lu)) => linalg::one_norm_condition(k, lu),
-            None => condition_of(&setup.tangent(&res, &d, setup.gamma)?),
-        };
-        let without = if setup.faces.is_empty() {
-            None
-        } else {
-            Some(condition_of(&setup.tangent(&res, &d, 0.0)?))
-        };
-        (Some(with), without)
+        Some(condition_of(&setup.tangent(&solved.res, &solved.d, 0.0)?))
     };
-    timings.condition = t.elapsed().as_secs_f64();
+    Ok((Some(with), without))
+}
 
-    // 3. Commit into a copy of the points.
-    let t = Instant::now();
-    let it = &res.it;
+/// The points after a converged step, and what the step did.
+struct Updated {
+    points: crate::points::Points,
+    strain_energy: f64,
+    dissipation: f64,
+    /// Work of loads, supports and implicit boundaries over the step (J).
+    work: f64,
+    ibm: Vec<crate::ibm::IbmReport>,
+    max_increment: f64,
+}
+
+/// Commit the converged increment into a copy of the points (`F`, `b_e`,
+/// stress, positions `x + D S d + S d^a`, volumes, GIMP domains), check
+/// them, and account the work: free dofs carry `f_ext` (trapezoidal between
+/// the step's start and end, tractions on their curves then), prescribed
+/// dofs their support force, implicit boundaries their reactions.
+fn update(setup: &Setup, solved: &Solved, start_loads: &crate::state::Forces) -> Result<Updated, StepFailure> {
+    let (sim, map, d) = (setup.sim, &setup.map, &solved.d);
+    let (res, it) = (&solved.res, &solved.res.it);
+    let lambda1 = setup.lambda;
+    let steps = sim.load_steps() as f64;
+    let lambda0 = (setup.step - 1) as f64 / steps;
     let mut pts = sim.state.points.clone();
     let (mut strain_energy, mut dissipation) = (0.0, 0.0);
     let total: Vec<P2> = (0..d.len())
@@ -553,7 +658,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         .collect();
     for p in 0..pts.len() {
         let st = &map.stencils[p];
-        let x = setup.moved(p, &d);
+        let x = setup.moved(p, d);
         let df = match setup.band.as_ref().and_then(|b| b.ops[p].as_ref()) {
             Some(ops) => {
                 let ga = st.gradient(|n| setup.da(n));
@@ -577,10 +682,8 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             dissipation += diss;
         }
     }
-    crate::state::check_points(&sim.model.grid, &pts, step, &residuals)?;
-    // Work: free dofs carry f_ext (trapezoidal between the step's start and
-    // end, tractions on their curves then), prescribed dofs their support
-    // force, implicit boundaries their reactions.
+    crate::state::check_points(&sim.model.grid, &pts, setup.step, &solved.residuals)?;
+    let forces = start_loads;
     let mut work = 0.0;
     let traction = !setup.loads.is_empty();
     for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
@@ -595,7 +698,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             }
         }
     }
-    let mut ibm_reports = Vec::new();
+    let mut ibm = Vec::new();
     if let Some(b) = &setup.band {
         // Out-of-balance of the points at the start (zero increment) and
         // the end of the step: the implicit boundaries' reactions.
@@ -616,55 +719,24 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         let r1 = per_node(&it.fint_free, &|i| res.fext[i]);
         let (reports, w) = b.step.reports(
             &sim.model.grid,
-            &map.dofs,
+            &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
             &r0,
             &r1,
-            &d,
+            d,
             sim.model.exact.as_ref(),
             lambda1 - lambda0,
         );
-        ibm_reports = reports;
+        ibm = reports;
         work += w;
     }
     let max_increment = total.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
-    timings.update = t.elapsed().as_secs_f64();
-
-    let faces = setup.faces.clone();
-    let active = map.active_cells.clone();
-    let (n_free, active_nodes, active_cells) = (map.dofs.n_free, map.dofs.active_nodes, map.active_cells.len());
-    let fext_norm = norm(&res.fext);
-    drop(setup);
-    sim.commit_quasi_static(pts, step, work, active, &faces, iterations, lambda1 - lambda0);
-    let errors = match &sim.model.exact {
-        Some(e) => e.errors(&sim.state.points, lambda1),
-        None => Vec::new(),
-    };
-    timings.total = start.elapsed().as_secs_f64();
-    Ok(StepReport {
-        step,
-        load_steps: steps,
-        load_factor: lambda1,
-        unknowns: n_free,
-        active_nodes,
-        active_cells,
-        residual_norm: fext_norm,
-        residuals,
-        timings,
-        energy: Energy {
-            strain: strain_energy,
-            external_work: sim.state.external_work,
-            plastic_dissipation: dissipation,
-            kinetic: 0.0,
-        },
-        condition,
-        condition_unstabilised,
-        iterations,
-        ghost_faces: faces.len(),
-        ibm: ibm_reports,
-        errors,
+    Ok(Updated {
+        points: pts,
+        strain_energy,
+        dissipation,
+        work,
+        ibm,
         max_increment,
-        boundaries,
-        dynamics: None,
     })
 }
 

@@ -61,7 +61,7 @@ pub struct Simulation {
     pub(crate) params: Params,
     pub(crate) state: State,
     /// Explicit dynamics: the mass pattern of the last step.
-    pub(crate) mass_cache: crate::dynamics::MassCache,
+    pub(crate) mass_cache: MassCache,
     /// The observer's progress hook (behind a mutex so steps can call it
     /// through `&self`).
     progress: Option<std::sync::Mutex<ProgressHook>>,
@@ -414,4 +414,15 @@ pub(crate) fn check_points(
         });
     }
     Ok(())
+}
+
+/// The mass pattern and symbolic Cholesky of the last step, reused while
+/// the assembly blocks (point groups and ghost faces) stay the same.
+#[derive(Default)]
+pub(crate) struct MassCache {
+    pub(crate) key: Vec<Vec<usize>>,
+    pub(crate) pattern: Option<(
+        crate::assembly::Pattern,
+        faer::sparse::linalg::solvers::SymbolicLlt<usize>,
+    )>,
 }

@@ -53,6 +53,21 @@ fn tangent_of_every_contribution_matches_finite_differences() {
             "follower pressure",
             sim_with("cantilever-follower-pressure-finite", |_| {}),
         ),
+        (
+            "F-bar, von Mises footing (IBM, yielding)",
+            sim_with("rigid-footing-large", |s| {
+                s.analysis.fbar = true;
+                s.materials[0].yield_stress = Some(1.0e3);
+            }),
+        ),
+        (
+            "F-bar, GIMP beam with ghost",
+            sim_with("elastic-beam-ghost", |s| {
+                s.grid.h = 1.0;
+                s.grid.origin = [0.0, -9.0];
+                s.analysis.fbar = true;
+            }),
+        ),
     ];
     for (name, sim) in cases {
         let e = sim.tangent_check(0.05).unwrap_or_else(|f| panic!("{name}: {f}"));

@@ -865,3 +865,55 @@ fn slender_cantilever_finite_clamps_agree() {
         );
     }
 }
+
+/// Settlement (m) and mean footing pressure over `c_u` after each step of
+/// the large-settlement footing.
+fn footing_curve(edit: impl FnOnce(&mut mpmlab::scene::Scene)) -> Vec<(f64, f64)> {
+    let mut sim = sim_with("rigid-footing-large", edit);
+    let spec = sim.model().ibm[0].clone();
+    let half_width = (spec.points[0][0] - spec.points[1][0]).abs();
+    let c_u = sim.model().materials[0].yield_stress.unwrap() / 2f64.sqrt();
+    let mut curve = Vec::new();
+    while !sim.finished() {
+        match sim.step() {
+            Ok(r) => {
+                let settlement = -spec.motion()[1] * r.load_factor;
+                let q = -r.ibm[0].reaction[1] / half_width;
+                curve.push((settlement, q / c_u));
+            }
+            Err(f) => panic!("{f}\ncurve so far {curve:?}"),
+        }
+    }
+    curve
+}
+
+#[test]
+fn rigid_footing_reaches_prandtl() {
+    // A smooth rigid strip footing on a weightless von Mises block:
+    // Prandtl's limit pressure is (2 + pi) c_u. The plateau is the mean
+    // pressure over the last 8 steps (settlement 20..29 mm, 2-3% of B,
+    // where the F-bar curve is flat to 0.5%). Q4 cells with 2x2 points lock
+    // under nearly incompressible plastic flow: without F-bar the pressure
+    // is 22% above Prandtl there and still rising. With F-bar the plateau
+    // is 5.6% above it at h = B/10 (a coarse Q4 mesh's discretisation
+    // error, from above); bound 8%. The issue asked 5%: finer grids and
+    // larger settlements lose Newton convergence (no load-step cutback
+    // yet), so that is left open.
+    let plateau = |curve: &[(f64, f64)]| curve[curve.len() - 8..].iter().map(|c| c.1).sum::<f64>() / 8.0;
+    let prandtl = 2.0 + std::f64::consts::PI;
+    let fbar = footing_curve(|_| {});
+    let locked = footing_curve(|s| s.analysis.fbar = false);
+    for ((s, q), (_, q0)) in fbar.iter().zip(&locked) {
+        println!("settlement {s:.5} m  q/c_u with F-bar {q:.4}, without {q0:.4}");
+    }
+    let (with, without) = (plateau(&fbar) / prandtl - 1.0, plateau(&locked) / prandtl - 1.0);
+    println!("plateau over Prandtl - 1: with F-bar {with:.4}, without {without:.4}");
+    assert!(with.abs() < 0.08, "{with}");
+    assert!(without > 0.2, "{without}");
+    // Flat: the last 8 steps within 2% of their mean.
+    let p = plateau(&fbar);
+    assert!(
+        fbar[fbar.len() - 8..].iter().all(|c| (c.1 / p - 1.0).abs() < 0.02),
+        "{fbar:?}"
+    );
+}

@@ -443,6 +443,10 @@ pub struct AnalysisSpec {
     /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.
     #[serde(default)]
     pub gamma_k: f64,
+    /// F-bar against volumetric locking (finite deformation): the
+    /// volumetric part of each point's deformation is its cell's mean.
+    #[serde(default)]
+    pub fbar: bool,
     /// Which cells the ghost face set treats as active.
     #[serde(default)]
     pub ghost_cells: GhostCells,
