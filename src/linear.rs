@@ -23,10 +23,11 @@ use crate::material::mul3;
 use crate::points::Points;
 use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
-use crate::state::{check_points, Simulation};
+use crate::state::{check_points, Forces, Simulation};
+use faer::sparse::SparseColMat;
 use std::time::Instant;
 
-/// One quasi-static small-strain load step.
+/// One quasi-static small-strain load step: each phase is a function below.
 pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let lambda0 = sim.state.step as f64 / sim.load_steps() as f64;
@@ -34,71 +35,188 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let start = Instant::now();
     let mut timings = Timings::default();
 
-    // 1-2. Map points to the grid and assemble.
-    let mut map = Mapping::build(
-        &sim.model.grid,
-        &sim.state.points,
-        &sim.model.bodies,
-        &sim.model.dirichlet,
-        lambda1 - lambda0,
-    );
-    let d_of = |p: usize| sim.material_of(p).d_matrix();
-    let grid = &sim.model.grid;
-    let pts = &sim.state.points;
-    // Implicit boundaries: prescribed increments d^a on the nodes of cut
-    // cells, and the band integrated as extra blocks (C (18)-(27)).
+    // 1. Map the points and collect the contributions (implicit boundaries'
+    //    d^a, band and f_d; ghost faces); the pattern once.
     let ibm_now = sim.ibm_boundaries_now(step)?;
-    let ibm_step = if ibm_now.is_empty() {
-        None
-    } else {
-        Some(
-            IbmStep::new(
-                &ibm_now,
-                grid,
-                &pts.x,
-                sim.params.delta_over_h,
-                lambda1 - lambda0,
-                sim.model.exact.as_ref(),
+    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1)?;
+    // 2. Assemble K and the right-hand side.
+    let system = assemble(&setup)?;
+    timings.assembly = start.elapsed().as_secs_f64();
+    // 3. Factorise (sparse Cholesky).
+    let t = Instant::now();
+    let factor = linalg::cholesky(&system.k).map_err(|e| StepFailure::Singular {
+        step,
+        reason: e.to_string(),
+    })?;
+    timings.factorisation = t.elapsed().as_secs_f64();
+    // 4. Solve and check the residual.
+    let t = Instant::now();
+    let (du, residuals) = solve(&setup, &system, &factor)?;
+    timings.solve = t.elapsed().as_secs_f64();
+    // 5. Condition numbers of the reduced stiffness.
+    let t = Instant::now();
+    let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor);
+    timings.condition = t.elapsed().as_secs_f64();
+    // 6. Update the points; work and stored energy.
+    let t = Instant::now();
+    let updated = update(&setup, &system, &du, &residuals)?;
+    timings.update = t.elapsed().as_secs_f64();
+    // 7. Commit and report.
+    let map = &setup.map;
+    let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
+    let faces = setup.faces.clone();
+    drop(setup);
+    let active_cells = active.len();
+    sim.commit_quasi_static(updated.points, step, updated.work, active, &faces, 1, lambda1 - lambda0);
+    sim.state.strain_energy = updated.strain_energy;
+    let errors = match &sim.model.exact {
+        Some(e) => e.errors(&sim.state.points, lambda1),
+        None => Vec::new(),
+    };
+    timings.total = start.elapsed().as_secs_f64();
+    Ok(StepReport {
+        step,
+        load_steps: sim.load_steps(),
+        load_factor: lambda1,
+        unknowns: n_free,
+        active_nodes,
+        active_cells,
+        residual_norm: system.residual_norm,
+        residuals,
+        timings,
+        energy: Energy {
+            strain: updated.strain_energy,
+            external_work: sim.state.external_work,
+            plastic_dissipation: 0.0,
+            kinetic: 0.0,
+        },
+        condition,
+        condition_unstabilised,
+        iterations: 1,
+        ghost_faces: faces.len(),
+        ibm: updated.ibm,
+        errors,
+        max_increment: updated.max_increment,
+        boundaries: system.boundaries,
+        dynamics: None,
+    })
+}
+
+/// What a linear step keeps fixed: the mapping and every method's
+/// contribution.
+struct Setup<'a> {
+    sim: &'a Simulation,
+    step: usize,
+    lambda0: f64,
+    lambda1: f64,
+    map: Mapping,
+    /// Implicit boundaries: `d^a`, the in-band points, the band's blocks
+    /// and `f_d` (points and band) per node.
+    ibm: Option<IbmStep<'a>>,
+    band: Vec<ibm::BandBlock>,
+    f_d: Vec<P2>,
+    faces: Vec<ghost::GhostFace>,
+    pattern: Pattern,
+}
+
+impl<'a> Setup<'a> {
+    fn new(
+        sim: &'a Simulation,
+        ibm_now: &'a [ibm::IbmBoundary],
+        step: usize,
+        lambda0: f64,
+        lambda1: f64,
+    ) -> Result<Setup<'a>, StepFailure> {
+        let grid = &sim.model.grid;
+        let pts = &sim.state.points;
+        let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0);
+        let d_of = |p: usize| sim.material_of(p).d_matrix();
+        // Implicit boundaries: prescribed increments d^a on the nodes of cut
+        // cells, and the band integrated as extra blocks (C (18)-(27)).
+        let ibm_step = if ibm_now.is_empty() {
+            None
+        } else {
+            Some(
+                IbmStep::new(
+                    ibm_now,
+                    grid,
+                    &pts.x,
+                    sim.params.delta_over_h,
+                    lambda1 - lambda0,
+                    sim.model.exact.as_ref(),
+                )
+                .map_err(|reason| StepFailure::Singular { step, reason })?,
             )
-            .map_err(|reason| StepFailure::Singular { step, reason })?,
-        )
-    };
-    // A grid constraint prescribes a node's whole motion: where an
-    // implicit boundary also puts a value d^a on that dof, the grid
-    // unknown carries only the rest.
-    if let Some(s) = &ibm_step {
-        for (n, c, u) in map.dofs.constrained.iter_mut() {
-            *u -= s.da[*n][*c];
+        };
+        // A grid constraint prescribes a node's whole motion: where an
+        // implicit boundary also puts a value d^a on that dof, the grid
+        // unknown carries only the rest.
+        if let Some(s) = &ibm_step {
+            for (n, c, u) in map.dofs.constrained.iter_mut() {
+                *u -= s.da[*n][*c];
+            }
         }
-    }
-    let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
-    let mut band: Vec<ibm::BandBlock> = Vec::new();
-    if let Some(s) = &ibm_step {
-        let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &d_of);
-        (band, f_d) = s.band(grid, &material);
-        for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
-            let st = &map.stencils[p];
-            let (bbar, _) = s.point_b(st, pts.x[p]);
-            ibm::add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
+        let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
+        let mut band: Vec<ibm::BandBlock> = Vec::new();
+        if let Some(s) = &ibm_step {
+            let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &d_of);
+            (band, f_d) = s.band(grid, &material);
+            for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+                let st = &map.stencils[p];
+                let (bbar, _) = s.point_b(st, pts.x[p]);
+                ibm::add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
+            }
         }
+        // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
+        let faces = if sim.params.gamma_k > 0.0 {
+            ghost::faces_of(grid, &map, sim.model.analysis.ghost_cells)
+        } else {
+            Vec::new()
+        };
+        let mut setup = Setup {
+            sim,
+            step,
+            lambda0,
+            lambda1,
+            map,
+            ibm: ibm_step,
+            band,
+            f_d,
+            faces,
+            pattern: Pattern::new(
+                &crate::assembly::DofMap {
+                    node_dof: Vec::new(),
+                    n_free: 0,
+                    constrained: Vec::new(),
+                    active_nodes: 0,
+                },
+                &[],
+                Storage::Lower,
+            ),
+        };
+        setup.pattern = Pattern::new(&setup.map.dofs, &setup.blocks(), Storage::Lower);
+        Ok(setup)
     }
-    // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
-    let gamma = sim.params.gamma_k;
-    let faces = if gamma > 0.0 {
-        ghost::faces_of(grid, &map, sim.model.analysis.ghost_cells)
-    } else {
-        Vec::new()
-    };
-    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-    blocks.extend(band.iter().map(|b| b.0.as_slice()));
-    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
-    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-    let (ng, nb) = (map.groups.len(), band.len());
-    let stiffness = |with_ghost: bool| {
-        pattern.assemble_with(&map.dofs, &blocks, |b, out| {
+
+    /// Assembly blocks: point groups, band blocks, ghost faces.
+    fn blocks(&self) -> Vec<&[usize]> {
+        let mut blocks: Vec<&[usize]> = self.map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+        blocks.extend(self.band.iter().map(|b| b.0.as_slice()));
+        blocks.extend(self.faces.iter().map(|f| f.nodes.as_slice()));
+        blocks
+    }
+
+    /// The reduced stiffness (lower triangle) and `K_fc du_c`, with or
+    /// without the ghost term.
+    fn stiffness(&self, with_ghost: bool) -> (SparseColMat<usize, f64>, Vec<f64>) {
+        let (map, pts) = (&self.map, &self.sim.state.points);
+        let d_of = |p: usize| self.sim.material_of(p).d_matrix();
+        let (ng, nb) = (map.groups.len(), self.band.len());
+        let gamma = self.sim.params.gamma_k;
+        self.pattern.assemble_with(&map.dofs, &self.blocks(), |b, out| {
             if b < ng {
                 let g = &map.groups[b];
-                match &ibm_step {
+                match &self.ibm {
                     Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
                         let m2 = 2 * g.nodes.len();
                         out.clear();
@@ -112,15 +230,31 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
                 }
             } else if b < ng + nb {
                 out.clear();
-                out.extend_from_slice(&band[b - ng].1);
+                out.extend_from_slice(&self.band[b - ng].1);
             } else {
-                faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
+                self.faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
             }
         })
-    };
-    let (k, coupling) = stiffness(true);
-    let (mut forces, boundaries) = sim.nodal_forces(&map, step, lambda1)?;
-    if let Some(s) = &ibm_step {
+    }
+}
+
+/// The assembled system of a step.
+struct System {
+    k: SparseColMat<usize, f64>,
+    /// Loads per unit load factor, internal forces (free and prescribed).
+    forces: Forces,
+    boundaries: Vec<crate::boundary::BoundaryReport>,
+    /// `lambda f_ext - f_int - K_fc du_c - f_d` on the free dofs.
+    rhs: Vec<f64>,
+    residual_norm: f64,
+}
+
+/// `K` and the right-hand side `lambda1 f_ext - f_int - K_fc du_c - f_d`.
+fn assemble(setup: &Setup) -> Result<System, StepFailure> {
+    let (sim, map, pts) = (setup.sim, &setup.map, &setup.sim.state.points);
+    let (k, coupling) = setup.stiffness(true);
+    let (mut forces, boundaries) = sim.nodal_forces(map, setup.step, setup.lambda1)?;
+    if let Some(s) = &setup.ibm {
         // Points inside a band work through B_bar: correct f_int.
         for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
             let st = &map.stencils[p];
@@ -136,6 +270,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             }
         }
     }
+    let lambda1 = setup.lambda1;
     let rhs: Vec<f64> = (0..map.dofs.n_free)
         .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
         .collect();
@@ -143,25 +278,26 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     for (n, d) in map.dofs.node_dof.iter().enumerate() {
         for c in 0..2 {
             if let Dof::Free(i) = d[c] {
-                rhs[i] -= f_d[n][c];
+                rhs[i] -= setup.f_d[n][c];
             }
         }
     }
     let residual_norm = norm(&rhs);
-    timings.assembly = start.elapsed().as_secs_f64();
+    Ok(System {
+        k,
+        forces,
+        boundaries,
+        rhs,
+        residual_norm,
+    })
+}
 
-    // 3. Factorise.
-    let t = Instant::now();
-    let factor = linalg::cholesky(&k).map_err(|e| StepFailure::Singular {
-        step,
-        reason: e.to_string(),
-    })?;
-    timings.factorisation = t.elapsed().as_secs_f64();
-
-    // 4. Solve and check the residual; ill-conditioned systems (tiny
-    // point volumes near boundaries) get up to two rounds of iterative
-    // refinement with the same factor, each recorded as a residual.
-    let t = Instant::now();
+/// Solve and check the residual; ill-conditioned systems (tiny point
+/// volumes near boundaries) get up to two rounds of iterative refinement
+/// with the same factor, each recorded as a residual.
+fn solve(setup: &Setup, system: &System, factor: &linalg::Factor) -> Result<(Vec<f64>, Vec<f64>), StepFailure> {
+    let (sim, step) = (setup.sim, setup.step);
+    let (k, rhs, residual_norm) = (&system.k, &system.rhs, system.residual_norm);
     let rel_of = |v: &[f64]| {
         if residual_norm > 0.0 {
             norm(v) / residual_norm
@@ -169,8 +305,8 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             norm(v)
         }
     };
-    let mut du = linalg::solve(&factor, &rhs);
-    let mut lin = residual_of(&k, &du, &rhs);
+    let mut du = linalg::solve(factor, rhs);
+    let mut lin = residual_of(k, &du, rhs);
     let mut rel = rel_of(&lin);
     let mut residuals = vec![if residual_norm > 0.0 { 1.0 } else { 0.0 }, rel];
     for _ in 0..2 {
@@ -178,13 +314,12 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             break;
         }
         let neg: Vec<f64> = lin.iter().map(|v| -v).collect();
-        let correction = linalg::solve(&factor, &neg);
+        let correction = linalg::solve(factor, &neg);
         du.iter_mut().zip(&correction).for_each(|(a, c)| *a += c);
-        lin = residual_of(&k, &du, &rhs);
+        lin = residual_of(k, &du, rhs);
         rel = rel_of(&lin);
         residuals.push(rel);
     }
-    timings.solve = t.elapsed().as_secs_f64();
     if !sim.report_progress(step, 1, rel) {
         return Err(StepFailure::Cancelled { step, residuals });
     }
@@ -202,23 +337,27 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             tolerance: sim.params.tolerance,
         });
     }
+    Ok((du, residuals))
+}
 
-    // Condition number of the reduced stiffness.
-    let t = Instant::now();
-    let condition = match sim.params.condition {
+/// Condition number of the reduced stiffness, and without the ghost term
+/// for comparison (infinite when singular).
+fn conditioning(setup: &Setup, system: &System, factor: &linalg::Factor) -> (Option<Condition>, Option<Condition>) {
+    let params = &setup.sim.params;
+    let k = &system.k;
+    let condition = match params.condition {
         ConditionMode::Off => None,
-        ConditionMode::Auto => Some(linalg::condition(&k, &factor, sim.params.dense_limit)),
-        ConditionMode::Dense => Some(linalg::condition(&k, &factor, usize::MAX)),
-        ConditionMode::Lanczos => Some(linalg::condition(&k, &factor, 0)),
+        ConditionMode::Auto => Some(linalg::condition(k, factor, params.dense_limit)),
+        ConditionMode::Dense => Some(linalg::condition(k, factor, usize::MAX)),
+        ConditionMode::Lanczos => Some(linalg::condition(k, factor, 0)),
     };
-    // Without the ghost term, for comparison (infinite when singular).
-    let condition_unstabilised = match (&condition, faces.is_empty()) {
+    let condition_unstabilised = match (&condition, setup.faces.is_empty()) {
         (Some(c), false) => {
-            let (k0, _) = stiffness(false);
-            let limit = match sim.params.condition {
+            let (k0, _) = setup.stiffness(false);
+            let limit = match params.condition {
                 ConditionMode::Dense => usize::MAX,
                 ConditionMode::Lanczos => 0,
-                _ => sim.params.dense_limit,
+                _ => params.dense_limit,
             };
             Some(match linalg::cholesky(&k0) {
                 Ok(f0) => linalg::condition(&k0, &f0, limit),
@@ -231,13 +370,30 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         }
         _ => None,
     };
-    timings.condition = t.elapsed().as_secs_f64();
+    (condition, condition_unstabilised)
+}
 
-    // 5. Update the points.
-    let t = Instant::now();
-    let nodal_d = nodal_increments(&map, &du);
+/// The points after a step, and what the step did.
+struct Updated {
+    points: Points,
+    /// Stored energy after the step (J per unit thickness).
+    strain_energy: f64,
+    work: f64,
+    ibm: Vec<IbmReport>,
+    max_increment: f64,
+}
+
+/// Update the points: `de = B du`, `s += D de`, `x += N du`,
+/// `V *= det(I + grad du)` (in a band `B_bar` and `D N d + N d^a`); the
+/// work of loads, supports and implicit boundaries; the stored energy.
+fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Result<Updated, StepFailure> {
+    let (sim, map, pts) = (setup.sim, &setup.map, &setup.sim.state.points);
+    let (step, lambda0, lambda1) = (setup.step, setup.lambda0, setup.lambda1);
+    let forces = &system.forces;
+    let d_of = |p: usize| sim.material_of(p).d_matrix();
+    let nodal_d = nodal_increments(map, du);
     // Points move with N (d + d^a); those inside a band with D N d + N d^a.
-    let nodal: Vec<P2> = match &ibm_step {
+    let nodal: Vec<P2> = match &setup.ibm {
         Some(s) => nodal_d
             .iter()
             .zip(&s.da)
@@ -246,10 +402,10 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         None => nodal_d.clone(),
     };
     let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
-    let (mut points, fint_fixed_new) = updated_points(sim, &map, &nodal);
+    let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal);
     let mut ibm_reports = Vec::new();
     let mut ibm_work = 0.0;
-    if let Some(s) = &ibm_step {
+    if let Some(s) = &setup.ibm {
         for p in (0..points.len()).filter(|&p| s.in_band[p]) {
             let st = &map.stencils[p];
             let (bb, plain) = s.point_b(st, pts.x[p]);
@@ -273,21 +429,21 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             }
             points.x[p] = [points.x[p][0] + dx[0], points.x[p][1] + dx[1]];
         }
-        let (reports, work) = point_ibm_reports(sim, &map, s, &points, &nodal_d, &forces.ext, lambda0, lambda1);
+        let (reports, work) = point_ibm_reports(sim, map, s, &points, &nodal_d, &forces.ext, lambda0, lambda1);
         ibm_reports = reports;
         ibm_work = work;
     }
-    check_points(&sim.model.grid, &points, step, &residuals)?;
+    check_points(&sim.model.grid, &points, step, residuals)?;
     // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
     let mut work = 0.0;
     for i in 0..map.dofs.n_free {
         work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * du[i];
     }
     for (c, &(n, comp, u)) in map.dofs.constrained.iter().enumerate() {
-        let total = u + ibm_step.as_ref().map_or(0.0, |s| s.da[n][comp]);
+        let total = u + setup.ibm.as_ref().map_or(0.0, |s| s.da[n][comp]);
         work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * total;
     }
-    if let Some(s) = &ibm_step {
+    if let Some(s) = &setup.ibm {
         // Body forces also work on the prescribed field's motion N d^a.
         for (n, d) in map.dofs.node_dof.iter().enumerate() {
             for c in 0..2 {
@@ -311,49 +467,12 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
                 0.5 * (0..3).map(|k| (s0[k] + s1[k]) * de[k]).sum::<f64>() * old.vol[p]
             })
             .sum::<f64>();
-    timings.update = t.elapsed().as_secs_f64();
-
-    // Commit.
-    sim.commit_quasi_static(
+    Ok(Updated {
         points,
-        step,
+        strain_energy,
         work,
-        map.active_cells.clone(),
-        &faces,
-        1,
-        lambda1 - lambda0,
-    );
-    sim.state.strain_energy = strain_energy;
-    let errors = match &sim.model.exact {
-        Some(e) => e.errors(&sim.state.points, lambda1),
-        None => Vec::new(),
-    };
-    timings.total = start.elapsed().as_secs_f64();
-    Ok(StepReport {
-        step,
-        load_steps: sim.load_steps(),
-        load_factor: lambda1,
-        unknowns: map.dofs.n_free,
-        active_nodes: map.dofs.active_nodes,
-        active_cells: map.active_cells.len(),
-        residual_norm,
-        residuals,
-        timings,
-        energy: Energy {
-            strain: strain_energy,
-            external_work: sim.state.external_work,
-            plastic_dissipation: 0.0,
-            kinetic: 0.0,
-        },
-        condition,
-        condition_unstabilised,
-        iterations: 1,
-        ghost_faces: faces.len(),
         ibm: ibm_reports,
-        errors,
         max_increment,
-        boundaries,
-        dynamics: None,
     })
 }
 
