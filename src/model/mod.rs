@@ -1,0 +1,403 @@
+//! The model: a validated scene turned into grid, materials, bodies with
+//! their material points, boundary conditions, loads and analysis settings.
+
+mod bodies;
+mod boundaries;
+mod conditions;
+mod exact;
+mod ibm;
+mod limits;
+mod materials;
+
+use boundaries::build_boundary;
+use exact::build_exact;
+pub use limits::{available_memory, bytes, parse_bytes, Limits};
+use limits::{check_names, short, Budget};
+
+use crate::basis::BasisKind;
+use crate::boundary::bspline::BSpline;
+use crate::boundary::{Boundary, Traction};
+use crate::exact::ExactSolution;
+use crate::geometry::{Region, P2};
+use crate::grid::Grid;
+use crate::ibm::IbmBoundary;
+use crate::material::{LinearElastic, Material};
+use crate::points::Points;
+use crate::quadrature::gauss_legendre;
+use crate::scene::number;
+use crate::scene::{
+    AnalysisSpec, BodySpec, BoundarySpec, DirichletKind, ExactSpec, FieldError, LayerSide, Locator, MaterialModel,
+    MaterialSide, Placement, RegionSpec, Scene, SceneError, TractionSpec,
+};
+
+/// A body: a named set of points of one material with one basis.
+#[derive(Clone, Debug)]
+pub struct Body {
+    pub name: String,
+    pub material: usize,
+    pub basis: BasisKind,
+    pub points_per_cell: usize,
+    /// Area of the region the points were generated from (m^2).
+    pub region_area: f64,
+}
+
+/// Where a grid-aligned Dirichlet condition acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridTarget {
+    /// Every node of grid line `index` along `axis` (`0`: the vertical line
+    /// `x = c`; `1`: the horizontal line `y = c`).
+    Line { axis: usize, index: usize },
+    /// One grid node.
+    Node(usize),
+}
+
+/// A grid-aligned Dirichlet condition: component `k` of the target nodes is
+/// prescribed to `value[k]` (total at load factor 1) where `Some`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GridDirichlet {
+    pub target: GridTarget,
+    pub value: [Option<f64>; 2],
+}
+
+/// A point load on material point `point`, total force at load factor 1 (N).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointLoad {
+    pub point: usize,
+    pub force: P2,
+}
+
+/// Everything a simulation starts from.
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub name: String,
+    pub description: String,
+    pub grid: Grid,
+    pub materials: Vec<Material>,
+    pub bodies: Vec<Body>,
+    pub points: Points,
+    pub dirichlet: Vec<GridDirichlet>,
+    /// Gravitational acceleration (m/s^2); body force = density * gravity.
+    pub gravity: P2,
+    pub point_loads: Vec<PointLoad>,
+    /// B-spline boundaries (tracked curves, optionally with tractions).
+    pub boundaries: Vec<Boundary>,
+    /// Implicit-boundary Dirichlet conditions.
+    pub ibm: Vec<IbmBoundary>,
+    pub analysis: AnalysisSpec,
+    pub exact: Option<ExactSolution>,
+}
+
+/// Largest grid the engine will build (cells).
+pub const MAX_CELLS: usize = 20_000_000;
+/// Most material points a model may have.
+pub const MAX_POINTS: usize = 10_000_000;
+/// Most vertices of an implicit boundary's polyline, and most tracking
+/// points of a B-spline boundary.
+pub const MAX_CURVE_POINTS: usize = 100_000;
+/// Most materials, bodies, boundaries and implicit boundaries (each);
+/// grid-aligned conditions may be ten times as many.
+pub const MAX_ENTRIES: usize = 1_000;
+/// Most point loads.
+pub const MAX_POINT_LOADS: usize = 10_000;
+/// Largest `dense_limit` (a dense eigenproblem of this many unknowns).
+pub const MAX_DENSE_LIMIT: usize = 20_000;
+/// Most characters of a name.
+pub const MAX_NAME: usize = 100;
+/// Most cells (or lattice points) times region pieces that point
+/// generation may test against each other.
+const MAX_GENERATION_WORK: u128 = 1_000_000_000;
+
+/// Estimated bytes per material point while stepping: the point arrays,
+/// its stencil (values, gradients, node indices), its constitutive
+/// response and its share of the recorded and reported fields. Measured
+/// peaks: 1.2 kB per point (a 10^6-point lattice, linear, standard basis,
+/// recorded), 1.6 kB (GIMP with Newton; explicit dynamics).
+pub const BYTES_PER_POINT: u64 = 4_096;
+/// Estimated bytes per grid node, for the per-node arrays every step
+/// allocates over the whole grid (dof numbering, prescribed values, nodal
+/// displacements and residuals, cell flags).
+pub const BYTES_PER_GRID_NODE: u64 = 512;
+/// Estimated bytes per node a body may make active: its rows of the sparse
+/// stiffness (or mass) matrix and of the Cholesky factor with fill-in
+/// (measured: about 3.5 kB per node for 1.6e5 active nodes).
+pub const BYTES_PER_ACTIVE_NODE: u64 = 8_192;
+
+impl Model {
+    /// Validate a parsed scene and build the model with the default
+    /// [`Limits`]. `text` and `file` are the scene's source, used to
+    /// locate errors.
+    pub fn build(scene: &Scene, text: &str, file: &str) -> Result<Model, SceneError> {
+        Self::build_with(scene, text, file, &Limits::default())
+    }
+
+    /// [`Model::build`] with explicit resource limits.
+    pub fn build_with(scene: &Scene, text: &str, file: &str, limits: &Limits) -> Result<Model, SceneError> {
+        Self::build_unlocated(scene, limits).map_err(|e| Locator::new(text).error(file, e))
+    }
+
+    /// Parse and build from scene text in one go.
+    pub fn from_text(text: &str, file: &str) -> Result<Model, SceneError> {
+        let scene = Scene::parse(text, file)?;
+        Self::build(&scene, text, file)
+    }
+
+    fn build_unlocated(scene: &Scene, limits: &Limits) -> Result<Model, FieldError> {
+        check_names(scene)?;
+        let grid = build_grid(scene)?;
+        let mut budget = Budget::new(scene, &grid, limits)?;
+
+        let materials = materials::build(scene)?;
+        let (bodies, regions, ranges, mut points) = bodies::build(scene, &grid, &materials, &mut budget)?;
+        let dirichlet = conditions::dirichlet(scene, &grid)?;
+        let (gravity, point_loads) = conditions::loads(scene, &grid, &points)?;
+
+        let a = &scene.analysis;
+        if !(1..=1_000_000).contains(&a.load_steps) {
+            return Err(FieldError::new("analysis.load_steps", "must be between 1 and 1000000"));
+        }
+        if !(a.tolerance > 0.0 && a.tolerance < 1.0) {
+            return Err(FieldError::new("analysis.tolerance", "must lie in (0, 1)"));
+        }
+        if !(1..=1000).contains(&a.max_iterations) {
+            return Err(FieldError::new("analysis.max_iterations", "must be between 1 and 1000"));
+        }
+        if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
+            return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
+        }
+        if a.fbar && a.kind != crate::scene::AnalysisKind::QuasiStaticFinite {
+            return Err(FieldError::new(
+                "analysis.fbar",
+                "F-bar modifies the finite-deformation (Newton) path only: kind = \"quasi-static-finite\"",
+            ));
+        }
+        if a.dense_limit > MAX_DENSE_LIMIT {
+            return Err(FieldError::new(
+                "analysis.dense_limit",
+                format!("must be at most {MAX_DENSE_LIMIT}, got {}", a.dense_limit),
+            ));
+        }
+        if !a.blowup_factor.is_finite() {
+            return Err(FieldError::new("analysis.blowup_factor", "must be finite"));
+        }
+
+        let exact = match &scene.exact {
+            None => None,
+            Some(ExactSpec::FreeMotion {}) => {
+                let duration = match (scene.analysis.kind, scene.analysis.duration) {
+                    (crate::scene::AnalysisKind::ExplicitDynamics, Some(d)) => d,
+                    _ => {
+                        return Err(FieldError::new(
+                            "exact.name",
+                            "free-motion needs kind = \"explicit-dynamics\" with a duration",
+                        ))
+                    }
+                };
+                let strained = bodies
+                    .iter()
+                    .zip(&scene.bodies)
+                    .any(|(b, spec)| materials[b.material].elastic.e != 0.0 && spec.velocity_gradient.is_some());
+                if strained {
+                    return Err(FieldError::new(
+                        "exact.name",
+                        "free motion with a velocity gradient is exact only for stress-free (E = 0) bodies",
+                    ));
+                }
+                let fields = scene
+                    .bodies
+                    .iter()
+                    .map(|b| {
+                        (
+                            b.velocity,
+                            b.velocity_gradient.unwrap_or([[0.0; 2]; 2]),
+                            b.velocity_centre,
+                        )
+                    })
+                    .collect();
+                Some(ExactSolution::FreeMotion { fields, duration })
+            }
+            Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
+        };
+
+        // Tracking points of all boundaries, and vertices of all implicit
+        // boundaries, together.
+        let mut total = 0usize;
+        for (k, b) in scene.boundaries.iter().enumerate() {
+            total = total.saturating_add(b.points.as_ref().map_or(0, Vec::len));
+            if total > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    format!("boundary[{k}].points"),
+                    format!("the boundaries have more than the {MAX_CURVE_POINTS} tracking points supported in all"),
+                ));
+            }
+        }
+        let mut total = 0usize;
+        for (k, b) in scene.ibm.iter().enumerate() {
+            total = total.saturating_add(b.points.len());
+            if total > MAX_CURVE_POINTS {
+                return Err(FieldError::new(
+                    format!("ibm[{k}].points"),
+                    format!("the implicit boundaries have more than the {MAX_CURVE_POINTS} points supported in all"),
+                ));
+            }
+        }
+        let mut boundaries: Vec<Boundary> = Vec::new();
+        for (k, spec) in scene.boundaries.iter().enumerate() {
+            if boundaries.iter().any(|b| b.name == spec.name) {
+                return Err(FieldError::new(
+                    format!("boundary[{k}].name"),
+                    format!("boundary `{}` is defined twice", spec.name),
+                ));
+            }
+            let b = build_boundary(k, spec, &grid, &bodies, &regions, &ranges, exact.is_some(), &mut points)?;
+            boundaries.push(b);
+        }
+
+        if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
+            validate_explicit(a, &dirichlet)?;
+            // Explicit dynamics divides by mass: every material needs density.
+            if let Some(k) = materials.iter().position(|m| !(m.density() > 0.0)) {
+                return Err(FieldError::new(
+                    format!("material[{k}].density"),
+                    "explicit dynamics needs a positive density",
+                ));
+            }
+            // Static exact solutions grow with the load factor; explicit
+            // loads act in full from the start, so only free motion applies.
+            if matches!(scene.exact, Some(ref e) if !matches!(e, ExactSpec::FreeMotion {})) {
+                return Err(FieldError::new(
+                    "exact.name",
+                    "explicit dynamics supports the free-motion exact solution only",
+                ));
+            }
+        } else if a.duration.is_some() {
+            return Err(FieldError::new(
+                "analysis.duration",
+                "only for kind = \"explicit-dynamics\"",
+            ));
+        }
+        let mut a = a.clone();
+        if let Some(d) = a.delta {
+            if !(d > 0.0 && d <= grid.h) {
+                return Err(FieldError::new("analysis.delta", "must lie in (0, h]"));
+            }
+            a.delta_over_h = d / grid.h;
+        }
+        if !(a.delta_over_h > 0.0 && a.delta_over_h <= 1.0) {
+            return Err(FieldError::new("analysis.delta_over_h", "must lie in (0, 1]"));
+        }
+        let ibm = ibm::build(scene, &grid, &a, &boundaries, &points, &regions, exact.as_ref())?;
+
+        Ok(Model {
+            name: scene.scene.name.clone(),
+            description: scene.scene.description.trim().to_string(),
+            grid,
+            materials,
+            bodies,
+            points,
+            dirichlet,
+            gravity,
+            point_loads,
+            boundaries,
+            ibm,
+            analysis: a,
+            exact,
+        })
+    }
+}
+
+/// Settings an explicit-dynamics analysis needs.
+fn validate_explicit(a: &AnalysisSpec, dirichlet: &[GridDirichlet]) -> Result<(), FieldError> {
+    match a.duration {
+        Some(d) if d > 0.0 && d.is_finite() => {}
+        Some(_) => return Err(FieldError::new("analysis.duration", "must be positive")),
+        None => {
+            return Err(FieldError::new(
+                "analysis.duration",
+                "explicit dynamics needs the simulated time `duration` (s)",
+            ))
+        }
+    }
+    if let Some(g) = a.gamma_m {
+        if !(g >= 0.0 && g.is_finite()) {
+            return Err(FieldError::new("analysis.gamma_m", "must be zero (off) or positive"));
+        }
+    }
+    if !(a.blowup_factor > 1.0) {
+        return Err(FieldError::new("analysis.blowup_factor", "must exceed 1"));
+    }
+    if dirichlet.iter().any(|d| d.value.iter().flatten().any(|v| *v != 0.0)) {
+        return Err(FieldError::new(
+            "dirichlet",
+            "explicit dynamics supports fixed and roller supports only (zero values)",
+        ));
+    }
+    Ok(())
+}
+
+impl Model {
+    /// The ghost mass penalty `gamma_M` (kg/m^3): the scene's, or a quarter
+    /// of the largest material density (G 3.3).
+    pub fn gamma_m(&self) -> f64 {
+        self.analysis
+            .gamma_m
+            .unwrap_or_else(|| 0.25 * self.materials.iter().map(|m| m.density()).fold(0.0, f64::max))
+    }
+}
+
+fn dist2(a: P2, b: P2) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+fn build_grid(scene: &Scene) -> Result<Grid, FieldError> {
+    let g = &scene.grid;
+    if !(g.h > 0.0 && g.h.is_finite()) {
+        return Err(FieldError::new(
+            "grid.h",
+            format!("the cell size must be positive, got {}", number(g.h)),
+        ));
+    }
+    if !g.origin.iter().all(|v| v.is_finite()) {
+        return Err(FieldError::new("grid.origin", "must be finite"));
+    }
+    if !g.size.iter().all(|v| v.is_finite()) {
+        return Err(FieldError::new("grid.size", "must be finite"));
+    }
+    // Cell counts stay floating point until they are known to be small.
+    let s = [g.size[0] / g.h, g.size[1] / g.h];
+    if s.iter().all(|s| s.is_finite() && *s >= 1.0 - 1e-9) && s[0] * s[1] > MAX_CELLS as f64 * (1.0 + 1e-9) {
+        return Err(FieldError::new(
+            "grid.h",
+            format!(
+                "a grid of size [{}, {}] with h = {} has {} x {} = {} cells, more than the {MAX_CELLS} supported; use a larger h",
+                number(g.size[0]),
+                number(g.size[1]),
+                number(g.h),
+                number(s[0].round()),
+                number(s[1].round()),
+                number(s[0].round() * s[1].round())
+            ),
+        ));
+    }
+    let mut n = [0usize; 2];
+    for d in 0..2 {
+        let s = s[d];
+        if !(s.is_finite() && s >= 1.0 - 1e-9) || (s - s.round()).abs() > 1e-9 * s.max(1.0) {
+            return Err(FieldError::new(
+                "grid.size",
+                format!(
+                    "must be a positive whole number of cells of size h = {}, got {} ({} cells)",
+                    number(g.h),
+                    number(g.size[d]),
+                    number(s)
+                ),
+            ));
+        }
+        n[d] = s.round() as usize;
+    }
+    Ok(Grid {
+        origin: g.origin,
+        h: g.h,
+        nx: n[0],
+        ny: n[1],
+    })
+}
