@@ -281,9 +281,44 @@ pub fn b_bar(st: &Stencil, d: &M2, g: &[M2; 2]) -> Vec<(Op, Op)> {
         .collect()
 }
 
+/// Why the least-squares fit of prescribed boundary values (B (36)) failed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FitError {
+    /// The dense eigen-decomposition of the fit's matrix failed.
+    Eigen(String),
+    /// The fit is singular or ill-conditioned (eigenvalues `lo .. hi`):
+    /// grid node `node` at `position` barely touches the boundary.
+    IllConditioned {
+        lo: f64,
+        hi: f64,
+        node: usize,
+        position: P2,
+    },
+    /// The Cholesky factorisation of the fit's matrix failed.
+    Factor(String),
+}
+
+impl std::fmt::Display for FitError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FitError::Eigen(e) => write!(f, "boundary least-squares fit: eigenvalues failed: {e}"),
+            FitError::IllConditioned { lo, hi, node, position } => write!(
+                f,
+                "the least-squares fit of the prescribed boundary values is singular or ill-conditioned \
+                 (eigenvalues {lo:.3e} .. {hi:.3e}): node {node} at ({:.6}, {:.6}) barely touches the boundary; \
+                 set fit_regularisation (e.g. 1e-10)",
+                position[0], position[1]
+            ),
+            FitError::Factor(e) => write!(f, "boundary least-squares fit: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for FitError {}
+
 /// Global least-squares fit of the exact displacement on the boundaries
 /// with `exact_field` (B (36)); writes the nodal values into `da`.
-fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, da: &mut [P2]) -> Result<(), String> {
+fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, da: &mut [P2]) -> Result<(), FitError> {
     use std::collections::BTreeMap;
     let mut index: BTreeMap<usize, usize> = BTreeMap::new();
     // Per Gauss point: the stencil's (node, N) pairs, the weight, the value.
@@ -350,7 +385,7 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
     }
     let evd = mat
         .self_adjoint_eigen(faer::Side::Lower)
-        .map_err(|e| format!("boundary least-squares fit: eigenvalues failed: {e:?}"))?;
+        .map_err(|e| FitError::Eigen(format!("{e:?}")))?;
     let (lo, hi) = (evd.S()[0], evd.S()[m - 1]);
     if !(lo > 1e-13 * hi) {
         // The node that carries most of the weakest mode: the one whose
@@ -360,17 +395,16 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
             .iter()
             .max_by(|a, b| weakest[*a.1].abs().total_cmp(&weakest[*b.1].abs()))
             .expect("m > 0");
-        let x = grid.node_position(node);
-        return Err(format!(
-            "the least-squares fit of the prescribed boundary values is singular or ill-conditioned \
-             (eigenvalues {lo:.3e} .. {hi:.3e}): node {node} at ({:.6}, {:.6}) barely touches the boundary; \
-             set fit_regularisation (e.g. 1e-10)",
-            x[0], x[1]
-        ));
+        return Err(FitError::IllConditioned {
+            lo,
+            hi,
+            node,
+            position: grid.node_position(node),
+        });
     }
     let llt = mat
         .llt(faer::Side::Lower)
-        .map_err(|e| format!("boundary least-squares fit: {e:?}"))?;
+        .map_err(|e| FitError::Factor(format!("{e:?}")))?;
     use faer::linalg::solvers::Solve;
     llt.solve_in_place(&mut rhs);
     for (&k, &i) in &index {
@@ -424,7 +458,7 @@ impl<'a> IbmStep<'a> {
         delta_over_h: f64,
         dlambda: f64,
         exact: Option<&ExactSolution>,
-    ) -> Result<IbmStep<'a>, String> {
+    ) -> Result<IbmStep<'a>, FitError> {
         let delta = delta_over_h * grid.h;
         let mut da = vec![[0.0; 2]; grid.num_nodes()];
         for b in bs.iter().filter(|b| !b.exact_field) {

@@ -145,7 +145,10 @@ impl<'a> Setup<'a> {
                     lambda1 - lambda0,
                     sim.model.exact.as_ref(),
                 )
-                .map_err(|reason| StepFailure::Singular { step, reason })?,
+                .map_err(|e| StepFailure::Singular {
+                    step,
+                    reason: e.to_string(),
+                })?,
             )
         };
         // A grid constraint prescribes a node's whole motion: where an

@@ -158,7 +158,10 @@ impl<'a> Setup<'a> {
                 lambda1 - lambda0,
                 model.exact.as_ref(),
             )
-            .map_err(|reason| StepFailure::Singular { step, reason })?;
+            .map_err(|e| StepFailure::Singular {
+                step,
+                reason: e.to_string(),
+            })?;
             // A grid constraint prescribes a node's whole motion: where an
             // implicit boundary also puts d^a on that dof, the grid unknown
             // carries only the rest.
