@@ -155,17 +155,7 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
                 }
             },
             Some((ops, d, da)) => {
-                let ga = st.gradient(|n| da[n]);
-                let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
-                for (k, (n, _, _)) in st.iter().enumerate() {
-                    for l in 0..2 {
-                        for i in 0..2 {
-                            for j in 0..2 {
-                                df[(i, j)] += ops[k][l][i][j] * d[n][l];
-                            }
-                        }
-                    }
-                }
+                let df = band_gradient(st, ops, d, da);
                 let r = sim.hencky(p).respond(&df, &be_matrix(pts.b_e[p]));
                 for (k, (n, _, _)) in st.iter().enumerate() {
                     for l in 0..2 {
@@ -187,6 +177,23 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
         *f = fbar_points;
     }
     it
+}
+
+/// `dF = I + sum_k sum_l d_kl G_k[l] + grad(S d^a)` of a point inside a
+/// band ([`GradOp`]).
+pub(crate) fn band_gradient(st: &crate::basis::Stencil, ops: &[GradOp], d: &[P2], da: &[P2]) -> Matrix2<f64> {
+    let ga = st.gradient(|n| da[n]);
+    let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
+    for (k, (n, _, _)) in st.iter().enumerate() {
+        for l in 0..2 {
+            for i in 0..2 {
+                for j in 0..2 {
+                    df[(i, j)] += ops[k][l][i][j] * d[n][l];
+                }
+            }
+        }
+    }
+    df
 }
 
 /// Material response and internal force for nodal increments `du`

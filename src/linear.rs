@@ -102,6 +102,14 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     })
 }
 
+/// Assembly blocks: point groups, band blocks, ghost faces.
+fn linear_blocks<'a>(map: &'a Mapping, band: &'a [ibm::BandBlock], faces: &'a [ghost::GhostFace]) -> Vec<&'a [usize]> {
+    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+    blocks.extend(band.iter().map(|b| b.0.as_slice()));
+    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
+    blocks
+}
+
 /// What a linear step keeps fixed: the mapping and every method's
 /// contribution.
 struct Setup<'a> {
@@ -176,7 +184,8 @@ impl<'a> Setup<'a> {
         } else {
             Vec::new()
         };
-        let mut setup = Setup {
+        let pattern = Pattern::new(&map.dofs, &linear_blocks(&map, &band, &faces), Storage::Lower);
+        Ok(Setup {
             sim,
             step,
             lambda0,
@@ -186,27 +195,12 @@ impl<'a> Setup<'a> {
             band,
             f_d,
             faces,
-            pattern: Pattern::new(
-                &crate::assembly::DofMap {
-                    node_dof: Vec::new(),
-                    n_free: 0,
-                    constrained: Vec::new(),
-                    active_nodes: 0,
-                },
-                &[],
-                Storage::Lower,
-            ),
-        };
-        setup.pattern = Pattern::new(&setup.map.dofs, &setup.blocks(), Storage::Lower);
-        Ok(setup)
+            pattern,
+        })
     }
 
-    /// Assembly blocks: point groups, band blocks, ghost faces.
     fn blocks(&self) -> Vec<&[usize]> {
-        let mut blocks: Vec<&[usize]> = self.map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-        blocks.extend(self.band.iter().map(|b| b.0.as_slice()));
-        blocks.extend(self.faces.iter().map(|f| f.nodes.as_slice()));
-        blocks
+        linear_blocks(&self.map, &self.band, &self.faces)
     }
 
     /// The reduced stiffness (lower triangle) and `K_fc du_c`, with or

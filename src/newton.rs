@@ -34,7 +34,7 @@
 
 use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::boundary::BoundaryReport;
-use crate::bulk::{blocks_of, evaluate_with, group_tangent, Iterate};
+use crate::bulk::{band_gradient, blocks_of, evaluate_with, group_tangent, Iterate};
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
 use crate::ibm::{self, BandBlock, GradOp, IbmBoundary, IbmStep};
@@ -44,7 +44,6 @@ use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
 use crate::state::Simulation;
 use faer::sparse::SparseColMat;
-use nalgebra::Matrix2;
 use std::time::Instant;
 
 fn norm(v: &[f64]) -> f64 {
@@ -99,6 +98,21 @@ impl Band<'_> {
 struct LoadBlock {
     boundary: usize,
     nodes: Vec<usize>,
+}
+
+/// Assembly blocks: point groups, ghost faces, band blocks, load blocks.
+fn newton_blocks<'a>(
+    map: &'a Mapping,
+    faces: &'a [GhostFace],
+    band: &'a Option<Band>,
+    loads: &'a [LoadBlock],
+) -> Vec<&'a [usize]> {
+    let mut blocks = blocks_of(map, faces);
+    if let Some(b) = band {
+        blocks.extend(b.blocks.iter().map(|b| b.0.as_slice()));
+    }
+    blocks.extend(loads.iter().map(|l| l.nodes.as_slice()));
+    blocks
 }
 
 /// What one Newton step keeps fixed over its iterations: the mapping and
@@ -221,7 +235,8 @@ impl<'a> Setup<'a> {
             nodes.dedup();
             loads.push(LoadBlock { boundary: k, nodes });
         }
-        let mut setup = Setup {
+        let pattern = Pattern::new(&map.dofs, &newton_blocks(&map, &faces, &band, &loads), Storage::Full);
+        Ok(Setup {
             sim,
             step,
             lambda: lambda1,
@@ -231,29 +246,12 @@ impl<'a> Setup<'a> {
             band,
             dead,
             loads,
-            pattern: Pattern::new(
-                &crate::assembly::DofMap {
-                    node_dof: Vec::new(),
-                    n_free: 0,
-                    constrained: Vec::new(),
-                    active_nodes: 0,
-                },
-                &[],
-                Storage::Full,
-            ),
-        };
-        setup.pattern = Pattern::new(&setup.map.dofs, &setup.blocks(), Storage::Full);
-        Ok(setup)
+            pattern,
+        })
     }
 
-    /// Assembly blocks: point groups, ghost faces, band blocks, load blocks.
     fn blocks(&self) -> Vec<&[usize]> {
-        let mut blocks = blocks_of(&self.map, &self.faces);
-        if let Some(b) = &self.band {
-            blocks.extend(b.blocks.iter().map(|b| b.0.as_slice()));
-        }
-        blocks.extend(self.loads.iter().map(|l| l.nodes.as_slice()));
-        blocks
+        newton_blocks(&self.map, &self.faces, &self.band, &self.loads)
     }
 
     /// `d^a` per node (zero without implicit boundaries).
@@ -662,21 +660,8 @@ fn update(setup: &Setup, solved: &Solved, start_loads: &crate::state::Forces) ->
     for p in 0..pts.len() {
         let st = &map.stencils[p];
         let x = setup.moved(p, d);
-        let df = match setup.band.as_ref().and_then(|b| b.ops[p].as_ref()) {
-            Some(ops) => {
-                let ga = st.gradient(|n| setup.da(n));
-                let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
-                for (k, (n, _, _)) in st.iter().enumerate() {
-                    for l in 0..2 {
-                        for i in 0..2 {
-                            for j in 0..2 {
-                                df[(i, j)] += ops[k][l][i][j] * d[n][l];
-                            }
-                        }
-                    }
-                }
-                df
-            }
+        let df = match setup.band.as_ref().and_then(|b| b.ops[p].as_ref().map(|o| (o, b))) {
+            Some((ops, b)) => band_gradient(st, ops, d, &b.step.da),
             None => increment_gradient(st, &total),
         };
         pts.x[p] = x;

@@ -285,21 +285,29 @@ fn plate_hole_symmetry_rollers_by_ibm() {
     }
 }
 
-/// Transverse tip displacement (beam frame) after each load step.
-fn cantilever_curve(angle: u32, h: f64) -> Vec<f64> {
-    let mut sim = sim_with(&format!("slender-cantilever-{angle}"), |s| {
+/// Transverse tip displacement (beam frame) after each load step of the
+/// cantilever scene `name` turned by `angle`, at grid size `h`, with
+/// `edit` applied to the scene.
+fn tip_curve(name: &str, angle: u32, h: f64, edit: impl FnOnce(&mut mpmlab::scene::Scene)) -> Vec<f64> {
+    let mut sim = sim_with(name, |s| {
         s.grid.h = h;
         s.analysis.condition = mpmlab::scene::ConditionMode::Off;
+        edit(s);
     });
     let (sn, c) = (angle as f64).to_radians().sin_cos();
     let mut curve = Vec::new();
     while !sim.finished() {
-        sim.step().unwrap_or_else(|f| panic!("{angle} deg, h {h}: {f}"));
+        sim.step().unwrap_or_else(|f| panic!("{name}, h {h}: {f}"));
         let tip = sim.model().boundaries[0].points[1];
         let u = sim.points().displacement(tip);
         curve.push(-sn * u[0] + c * u[1]);
     }
     curve
+}
+
+/// Transverse tip displacement of C 5.4's cantilever (small strain).
+fn cantilever_curve(angle: u32, h: f64) -> Vec<f64> {
+    tip_curve(&format!("slender-cantilever-{angle}"), angle, h, |_| {})
 }
 
 #[test]
@@ -809,9 +817,7 @@ fn two_materials_on_one_roller_keep_their_own_stresses() {
 /// Transverse tip displacement (beam frame) after each step of the finite
 /// cantilever clamped by IBM at `angle`, or on the grid line x = 0.
 fn finite_cantilever_curve(angle: u32, h: f64, grid_clamp: bool) -> Vec<f64> {
-    let mut sim = sim_with(&format!("slender-cantilever-finite-{angle}"), |s| {
-        s.grid.h = h;
-        s.analysis.condition = mpmlab::scene::ConditionMode::Off;
+    tip_curve(&format!("slender-cantilever-finite-{angle}"), angle, h, |s| {
         if grid_clamp {
             s.ibm.clear();
             s.dirichlet.push(mpmlab::scene::DirichletSpec {
@@ -823,16 +829,7 @@ fn finite_cantilever_curve(angle: u32, h: f64, grid_clamp: bool) -> Vec<f64> {
                 normal_displacement: None,
             });
         }
-    });
-    let (sn, c) = (angle as f64).to_radians().sin_cos();
-    let mut curve = Vec::new();
-    while !sim.finished() {
-        sim.step().unwrap_or_else(|f| panic!("{angle} deg, h {h}: {f}"));
-        let tip = sim.model().boundaries[0].points[1];
-        let u = sim.points().displacement(tip);
-        curve.push(-sn * u[0] + c * u[1]);
-    }
-    curve
+    })
 }
 
 #[test]
