@@ -593,16 +593,27 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
                 ),
             });
         }
-        // The full correction; its residual opens the next iteration.
+        // The full correction; its residual opens the next iteration. With
+        // `analysis.line_search`, a correction that makes the residual
+        // non-finite or larger is halved (at most 10 times) first.
         let t = Instant::now();
-        for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
-            for c in 0..2 {
-                if let Dof::Free(i) = dofs[c] {
-                    d[n][c] += dd[i];
+        let mut alpha = 1.0;
+        let start = d.clone();
+        loop {
+            for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
+                for c in 0..2 {
+                    if let Dof::Free(i) = dofs[c] {
+                        d[n][c] = start[n][c] + alpha * dd[i];
+                    }
                 }
             }
+            res = setup.residual(&d)?;
+            let better = relative(&res) <= rel;
+            if !sim.model.analysis.line_search || better || alpha < 1e-3 {
+                break;
+            }
+            alpha *= 0.5;
         }
-        res = setup.residual(&d)?;
         timings.assembly += t.elapsed().as_secs_f64();
         last = Some((k, lu));
         iterations += 1;

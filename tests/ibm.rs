@@ -888,14 +888,12 @@ fn footing_curve(edit: impl FnOnce(&mut mpmlab::scene::Scene)) -> Vec<(f64, f64)
 fn rigid_footing_reaches_prandtl() {
     // A smooth rigid strip footing on a weightless von Mises block:
     // Prandtl's limit pressure is (2 + pi) c_u. The plateau is the mean
-    // pressure over the last 8 steps (settlement 20..29 mm, 2-3% of B,
-    // where the F-bar curve is flat to 0.5%). Q4 cells with 2x2 points lock
-    // under nearly incompressible plastic flow: without F-bar the pressure
-    // is 22% above Prandtl there and still rising. With F-bar the plateau
-    // is 5.6% above it at h = B/10 (a coarse Q4 mesh's discretisation
-    // error, from above); bound 8%. The issue asked 5%: finer grids and
-    // larger settlements lose Newton convergence (no load-step cutback
-    // yet), so that is left open.
+    // pressure over the last 8 steps (settlement 24..29 mm, 2.4-2.9% of B,
+    // flat to 0.5%). Q4 cells with 2x2 points lock under nearly
+    // incompressible plastic flow: without F-bar the pressure is 13% above
+    // Prandtl's at h = B/20 (22% at B/10). With F-bar the plateau is 4.9%
+    // above it at h = B/20 (5.6% at B/10: a coarse Q4 mesh errs from
+    // above); bound: the issue's 5%, and more than 10% without F-bar.
     let plateau = |curve: &[(f64, f64)]| curve[curve.len() - 8..].iter().map(|c| c.1).sum::<f64>() / 8.0;
     let prandtl = 2.0 + std::f64::consts::PI;
     let fbar = footing_curve(|_| {});
@@ -905,8 +903,8 @@ fn rigid_footing_reaches_prandtl() {
     }
     let (with, without) = (plateau(&fbar) / prandtl - 1.0, plateau(&locked) / prandtl - 1.0);
     println!("plateau over Prandtl - 1: with F-bar {with:.4}, without {without:.4}");
-    assert!(with.abs() < 0.08, "{with}");
-    assert!(without > 0.2, "{without}");
+    assert!(with.abs() < 0.05, "{with}");
+    assert!(without > 0.1, "{without}");
     // Flat: the last 8 steps within 2% of their mean.
     let p = plateau(&fbar);
     assert!(

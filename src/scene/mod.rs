@@ -443,6 +443,10 @@ pub struct AnalysisSpec {
     /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.
     #[serde(default)]
     pub gamma_k: f64,
+    /// Newton line search (finite deformation): halve a correction that
+    /// makes the residual non-finite or larger.
+    #[serde(default)]
+    pub line_search: bool,
     /// F-bar against volumetric locking (finite deformation): the
     /// volumetric part of each point's deformation is its cell's mean.
     #[serde(default)]
