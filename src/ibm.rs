@@ -560,13 +560,17 @@ pub fn add_fd(st: &Stencil, bbar: &[Op], c: &[[f64; 3]; 3], da: &[P2], w: f64, f
     }
 }
 
+/// A material point's position and small-strain elasticity matrix.
+type PointC = (P2, [[f64; 3]; 3]);
+
 /// The elasticity the band takes at each of its points: that of the
 /// material point nearest to it in its cell (or the cells around), so that
 /// bodies of different stiffness under one boundary each get their own,
 /// also where an interface between them crosses a cut cell.
 pub struct BandMaterial {
-    /// Per grid cell: the points in it, with their `C`.
-    cells: Vec<Vec<(P2, [[f64; 3]; 3])>>,
+    /// Per grid cell holding points: the points, with their `C` (a map,
+    /// so a large grid costs nothing where there is no material).
+    cells: std::collections::HashMap<usize, Vec<PointC>>,
     nx: usize,
     ny: usize,
     /// Volume-weighted mean over all points (for a band point with no
@@ -578,7 +582,7 @@ pub struct BandMaterial {
 impl BandMaterial {
     /// `c_of(p)` is point `p`'s small-strain elasticity matrix (Pa).
     pub fn new(grid: &Grid, xs: &[P2], vol: &[f64], c_of: &dyn Fn(usize) -> [[f64; 3]; 3]) -> BandMaterial {
-        let mut cells: Vec<Vec<(P2, [[f64; 3]; 3])>> = vec![Vec::new(); grid.num_cells()];
+        let mut cells: std::collections::HashMap<usize, Vec<PointC>> = Default::default();
         let (mut total, mut total_v) = ([[0.0; 3]; 3], 0.0);
         for p in (0..xs.len()).filter(|&p| vol[p] > 0.0) {
             let c = c_of(p);
@@ -589,7 +593,7 @@ impl BandMaterial {
             }
             total_v += vol[p];
             if let Some((i, j)) = grid.cell_of(xs[p]) {
-                cells[j * grid.nx + i].push((xs[p], c));
+                cells.entry(j * grid.nx + i).or_default().push((xs[p], c));
             }
         }
         let mean = if total_v > 0.0 {
@@ -612,7 +616,7 @@ impl BandMaterial {
         };
         let nearest = |cells: &mut dyn Iterator<Item = usize>| {
             cells
-                .flat_map(|c| self.cells[c].iter())
+                .flat_map(|c| self.cells.get(&c).into_iter().flatten())
                 .min_by(|a, b| dist2(a.0, x).total_cmp(&dist2(b.0, x)))
                 .map(|&(_, c)| c)
         };
