@@ -73,19 +73,19 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
             .iter()
             .map(|g| {
                 let (mut sj, mut sv) = (0.0, 0.0);
-                let members: Vec<(usize, f64)> = g
+                let members: Vec<(usize, Matrix2<f64>)> = g
                     .points
                     .iter()
                     .filter(|&&p| pts.vol0[p] > 0.0 && !in_band(p))
-                    .map(|&p| (p, increment_gradient(&map.stencils[p], total).determinant()))
+                    .map(|&p| (p, increment_gradient(&map.stencils[p], total)))
                     .collect();
-                for &(p, j) in &members {
-                    sj += pts.vol[p] * j;
+                for &(p, df) in &members {
+                    sj += pts.vol[p] * df.determinant();
                     sv += pts.vol[p];
                 }
                 let jbar = if sv > 0.0 { sj / sv } else { 1.0 };
-                for (p, j) in members {
-                    c[p] = Some((jbar / j).sqrt());
+                for (p, df) in members {
+                    c[p] = Some(((jbar / df.determinant()).sqrt(), df));
                 }
                 (jbar, sv)
             })
@@ -125,8 +125,7 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
                     }
                     r
                 }
-                Some(c) => {
-                    let df = increment_gradient(st, total);
+                Some((c, df)) => {
                     let r = sim.hencky(p).respond(&(df * c), &be_matrix(pts.b_e[p]));
                     // P = tau(dF_bar) dF^-T = c P_bar.
                     let pm = r.p * c;
@@ -292,12 +291,13 @@ pub(crate) fn group_tangent(
         }
         // F-bar: the patch coupling dc_p Q_p.
         if let Some((fp, big_h)) = fp {
-            let hp: Vec<f64> = (0..st.len)
-                .flat_map(|bb| {
-                    let h = fp.finv_t * nalgebra::Vector2::new(st.dw[bb][0], st.dw[bb][1]);
-                    [h[0], h[1]]
-                })
-                .collect();
+            // h_p(b, k) = (dF_p^-T grad S_b)_k.
+            let mut hp = [0.0; 2 * crate::basis::MAX_NODES];
+            for bb in 0..st.len {
+                let h = fp.finv_t * nalgebra::Vector2::new(st.dw[bb][0], st.dw[bb][1]);
+                hp[2 * bb] = h[0];
+                hp[2 * bb + 1] = h[1];
+            }
             for a in 0..st.len {
                 let qa = fp.q * nalgebra::Vector2::new(st.dw[a][0], st.dw[a][1]);
                 for l in 0..2 {

@@ -480,10 +480,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
     let momentum = pts.momentum();
     sim.commit(pts, step, work, &map, &faces, 0);
     let lambda = step as f64 / steps as f64;
-    let errors = match &sim.model.exact {
-        Some(e) => e.errors(&sim.state.points, lambda),
-        None => Vec::new(),
-    };
+    let errors = sim.exact_errors(lambda);
     timings.total = start.elapsed().as_secs_f64();
     Ok(StepReport {
         step,

@@ -69,10 +69,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let active_cells = active.len();
     sim.commit_quasi_static(updated.points, step, updated.work, active, &faces, 1, lambda1 - lambda0);
     sim.state.strain_energy = updated.strain_energy;
-    let errors = match &sim.model.exact {
-        Some(e) => e.errors(&sim.state.points, lambda1),
-        None => Vec::new(),
-    };
+    let errors = sim.exact_errors(lambda1);
     timings.total = start.elapsed().as_secs_f64();
     Ok(StepReport {
         step,

@@ -127,6 +127,12 @@ struct Setup<'a> {
     band: Option<Band<'a>>,
     /// Body forces and point loads at `lambda`, on the free dofs.
     dead: Vec<f64>,
+    /// Loads per unit load factor at the start of the step (tractions on
+    /// the curves then) and the internal force of the start-of-step
+    /// stresses: the work's trapezoidal rule.
+    start_loads: crate::state::Forces,
+    /// Each boundary at the start of the step, for the report.
+    boundaries: Vec<BoundaryReport>,
     loads: Vec<LoadBlock>,
     pattern: Pattern,
 }
@@ -198,9 +204,12 @@ impl<'a> Setup<'a> {
                 f_d,
             })
         };
-        // Dead loads: body forces and point loads.
-        let forces = sim.dead_forces(&map);
-        let dead: Vec<f64> = forces.ext.iter().map(|f| lambda1 * f).collect();
+        // Dead loads (body forces and point loads) at lambda; the loads at
+        // the start of the step with the tractions on the curves then (for
+        // the work's trapezoidal rule) and each boundary as it is then.
+        let mut start_loads = sim.dead_forces(&map);
+        let dead: Vec<f64> = start_loads.ext.iter().map(|f| lambda1 * f).collect();
+        let boundaries = sim.add_tractions(&map, step, lambda1, &mut start_loads.ext)?;
         // Tractions: a load stiffness block per loaded boundary over the
         // nodes its force can reach during the step (the cells the curve
         // cuts now and their neighbours: a curve moving into a new cell
@@ -245,6 +254,8 @@ impl<'a> Setup<'a> {
             gamma,
             band,
             dead,
+            start_loads,
+            boundaries,
             loads,
             pattern,
         })
@@ -444,7 +455,6 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     //    at the start of the step (for the work) and the boundaries then.
     let ibm_now = sim.ibm_boundaries_now(step)?;
     let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1)?;
-    let (start_loads, boundaries) = sim.nodal_forces(&setup.map, step, lambda1)?;
     timings.assembly += start.elapsed().as_secs_f64();
     // 2. Newton on the nodal unknowns.
     let solved = newton(&setup, &mut timings)?;
@@ -455,10 +465,10 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     // 4. The points' new state, the work of loads and supports, and the
     //    implicit boundaries' reactions.
     let t = Instant::now();
-    let updated = update(&setup, &solved, &start_loads)?;
+    let updated = update(&setup, &solved)?;
     timings.update = t.elapsed().as_secs_f64();
     // 5. Commit and report.
-    let faces = setup.faces.clone();
+    let (faces, boundaries) = (setup.faces.clone(), setup.boundaries.clone());
     let map = &setup.map;
     let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
     drop(setup);
@@ -473,10 +483,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         solved.iterations,
         lambda1 - lambda0,
     );
-    let errors = match &sim.model.exact {
-        Some(e) => e.errors(&sim.state.points, lambda1),
-        None => Vec::new(),
-    };
+    let errors = sim.exact_errors(lambda1);
     timings.total = start.elapsed().as_secs_f64();
     Ok(StepReport {
         step,
@@ -654,7 +661,7 @@ struct Updated {
 /// them, and account the work: free dofs carry `f_ext` (trapezoidal between
 /// the step's start and end, tractions on their curves then), prescribed
 /// dofs their support force, implicit boundaries their reactions.
-fn update(setup: &Setup, solved: &Solved, start_loads: &crate::state::Forces) -> Result<Updated, StepFailure> {
+fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
     let (sim, map, d) = (setup.sim, &setup.map, &solved.d);
     let (res, it) = (&solved.res, &solved.res.it);
     let lambda1 = setup.lambda;
@@ -682,7 +689,7 @@ fn update(setup: &Setup, solved: &Solved, start_loads: &crate::state::Forces) ->
         }
     }
     crate::state::check_points(&sim.model.grid, &pts, setup.step, &solved.residuals)?;
-    let forces = start_loads;
+    let forces = &setup.start_loads;
     let mut work = 0.0;
     let traction = !setup.loads.is_empty();
     for (n, dofs) in map.dofs.node_dof.iter().enumerate() {

@@ -313,6 +313,20 @@ impl Simulation {
         lambda: f64,
     ) -> Result<(Forces, Vec<BoundaryReport>), StepFailure> {
         let mut f = self.dead_forces(map);
+        let reports = self.add_tractions(map, step, lambda, &mut f.ext)?;
+        Ok((f, reports))
+    }
+
+    /// Add every boundary's traction (per unit load factor, on the curves
+    /// through the points' current positions) to `ext` on the free dofs;
+    /// a report per boundary with its resultant at `lambda`.
+    pub(crate) fn add_tractions(
+        &self,
+        map: &Mapping,
+        step: usize,
+        lambda: f64,
+        ext: &mut [f64],
+    ) -> Result<Vec<BoundaryReport>, StepFailure> {
         let pts = &self.state.points;
         let active = |n: usize| map.dofs.node_dof[n][0] != Dof::Inactive;
         let mut reports = Vec::with_capacity(self.model.boundaries.len());
@@ -327,13 +341,22 @@ impl Simulation {
             for (n, force) in forces {
                 for c in 0..2 {
                     if let Dof::Free(i) = map.dofs.node_dof[n][c] {
-                        f.ext[i] += force[c];
+                        ext[i] += force[c];
                     }
                 }
             }
             reports.push(report);
         }
-        Ok((f, reports))
+        Ok(reports)
+    }
+
+    /// Errors against the scene's exact solution at `load_factor` (none
+    /// without one).
+    pub(crate) fn exact_errors(&self, load_factor: f64) -> Vec<crate::exact::ErrorNorm> {
+        match &self.model.exact {
+            Some(e) => e.errors(&self.state.points, load_factor),
+            None => Vec::new(),
+        }
     }
 
     /// External force per unit load factor of body forces and point loads,
