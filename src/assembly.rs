@@ -12,7 +12,7 @@ use crate::basis::{stencil, BasisKind, Stencil};
 use crate::grid::Grid;
 use crate::model::{Body, GridDirichlet, GridTarget};
 use crate::points::Points;
-use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use std::collections::BTreeMap;
 
 /// What a node's displacement component is this step.
@@ -44,18 +44,15 @@ pub struct Group {
     pub points: Vec<usize>,
 }
 
-/// The sparsity pattern of the reduced stiffness (lower triangle) and where
-/// each group's local entries go.
+/// The sparsity pattern of a reduced matrix assembled from dense blocks
+/// (compressed columns, rows sorted): built once per step, refilled by
+/// every assembly. No triplets are kept: a block's entries are added where
+/// they belong, found by binary search in their column, in block order (so
+/// sums of overlapping blocks are formed in the same order as before).
 pub struct Pattern {
     pub n: usize,
     symbolic: SymbolicSparseColMat<usize>,
-    argsort: Argsort<usize>,
-    /// Per group, the local entries `(r, c)` (indices into the group's
-    /// `2m x 2m` matrix) that are free-free lower-triangle entries, in
-    /// triplet order.
-    local: Vec<Vec<(u16, u16)>>,
-    /// Number of triplets.
-    pub len: usize,
+    storage: Storage,
 }
 
 /// The points mapped to the grid at the start of a step.
@@ -261,43 +258,80 @@ pub enum Storage {
     Full,
 }
 
-fn block_dofs(dofs: &DofMap, nodes: &[usize]) -> Vec<Dof> {
-    nodes.iter().flat_map(|&n| dofs.node_dof[n]).collect()
-}
-
 impl Pattern {
     /// The pattern of a matrix assembled from dense blocks, each over a list
     /// of nodes (a stencil group, a ghost face's six nodes, ...): the
-    /// free-free entries of every block, in triplet order.
+    /// free-free entries of every block (those on or below the diagonal
+    /// for [`Storage::Lower`]). Memory: the node adjacency (4 bytes per node
+    /// pair of a block) while it is built, then the pattern itself.
     pub fn new(dofs: &DofMap, blocks: &[&[usize]], storage: Storage) -> Pattern {
-        let mut pairs = Vec::new();
-        let mut local = Vec::with_capacity(blocks.len());
-        for nodes in blocks {
-            let bd = block_dofs(dofs, nodes);
-            let mut l = Vec::new();
-            for (c, dc) in bd.iter().enumerate() {
-                let Dof::Free(col) = *dc else { continue };
-                for (r, dr) in bd.iter().enumerate() {
-                    if let Dof::Free(row) = *dr {
-                        if storage == Storage::Full || row >= col {
-                            pairs.push(Pair::new(row, col));
-                            l.push((r as u16, c as u16));
+        let n = dofs.n_free;
+        let nodes = dofs.node_dof.len();
+        let free = |nd: usize| dofs.node_dof[nd].iter().any(|d| matches!(d, Dof::Free(_)));
+        // Node adjacency: for each node, the nodes it shares a block with.
+        let mut count = vec![0u32; nodes + 1];
+        for b in blocks {
+            let m = b.iter().filter(|&&nd| free(nd)).count() as u32;
+            for &a in b.iter().filter(|&&nd| free(nd)) {
+                count[a] += m;
+            }
+        }
+        let mut start = vec![0usize; nodes + 1];
+        for a in 0..nodes {
+            start[a + 1] = start[a] + count[a] as usize;
+        }
+        let mut adj = vec![0u32; start[nodes]];
+        let mut fill = start.clone();
+        for b in blocks {
+            for &a in b.iter().filter(|&&nd| free(nd)) {
+                for &c in b.iter().filter(|&&nd| free(nd)) {
+                    adj[fill[a]] = c as u32;
+                    fill[a] += 1;
+                }
+            }
+        }
+        // Columns: for each free dof, the free dofs of its node's
+        // neighbours (below the diagonal only for the lower triangle).
+        let mut col_of = vec![usize::MAX; n];
+        for (nd, d) in dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = d[c] {
+                    col_of[i] = nd;
+                }
+            }
+        }
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        col_ptr.push(0usize);
+        let mut row_idx = Vec::new();
+        let mut rows = Vec::new();
+        let mut neighbours: Vec<u32> = Vec::new();
+        for (col, &nd) in col_of.iter().enumerate() {
+            neighbours.clear();
+            neighbours.extend_from_slice(&adj[start[nd]..start[nd + 1]]);
+            neighbours.sort_unstable();
+            neighbours.dedup();
+            rows.clear();
+            for &b in &neighbours {
+                for d in dofs.node_dof[b as usize] {
+                    if let Dof::Free(r) = d {
+                        if storage == Storage::Full || r >= col {
+                            rows.push(r);
                         }
                     }
                 }
             }
-            local.push(l);
+            rows.sort_unstable();
+            row_idx.extend_from_slice(&rows);
+            col_ptr.push(row_idx.len());
         }
-        let n = dofs.n_free;
-        let (symbolic, argsort) =
-            SymbolicSparseColMat::try_new_from_indices(n, n, &pairs).expect("indices are in range by construction");
-        Pattern {
-            n,
-            symbolic,
-            argsort,
-            local,
-            len: pairs.len(),
-        }
+        // faer checks the invariants: sorted, in-range rows.
+        let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        Pattern { n, symbolic, storage }
+    }
+
+    /// Stored entries.
+    pub fn nnz(&self) -> usize {
+        self.symbolic.row_idx().len()
     }
 
     /// Assemble from dense blocks: `fill(b, out)` writes block `b`'s
@@ -310,32 +344,45 @@ impl Pattern {
         blocks: &[&[usize]],
         mut fill: impl FnMut(usize, &mut Vec<f64>),
     ) -> (SparseColMat<usize, f64>, Vec<f64>) {
-        let mut values = Vec::with_capacity(self.len);
+        let mut values = vec![0.0; self.nnz()];
         let mut coupling = vec![0.0; self.n];
+        let (cp, ri) = (self.symbolic.col_ptr(), self.symbolic.row_idx());
         let mut kb = Vec::new();
-        for (b, (nodes, local)) in blocks.iter().zip(&self.local).enumerate() {
+        let mut bd = Vec::new();
+        for (b, nodes) in blocks.iter().enumerate() {
             fill(b, &mut kb);
             let m2 = 2 * nodes.len();
-            for &(r, c) in local {
-                values.push(kb[r as usize * m2 + c as usize]);
-            }
-            let bd = block_dofs(dofs, nodes);
+            bd.clear();
+            bd.extend(nodes.iter().flat_map(|&n| dofs.node_dof[n]));
             for (c, dc) in bd.iter().enumerate() {
-                let Dof::Fixed(k) = *dc else { continue };
-                let du = dofs.constrained[k].2;
-                if du == 0.0 {
-                    continue;
-                }
-                for (r, dr) in bd.iter().enumerate() {
-                    if let Dof::Free(row) = *dr {
-                        coupling[row] += kb[r * m2 + c] * du;
+                match *dc {
+                    Dof::Free(col) => {
+                        let column = &ri[cp[col]..cp[col + 1]];
+                        for (r, dr) in bd.iter().enumerate() {
+                            if let Dof::Free(row) = *dr {
+                                if self.storage == Storage::Full || row >= col {
+                                    let k = column.binary_search(&row).expect("the pattern holds every block entry");
+                                    values[cp[col] + k] += kb[r * m2 + c];
+                                }
+                            }
+                        }
                     }
+                    Dof::Fixed(k) => {
+                        let du = dofs.constrained[k].2;
+                        if du == 0.0 {
+                            continue;
+                        }
+                        for (r, dr) in bd.iter().enumerate() {
+                            if let Dof::Free(row) = *dr {
+                                coupling[row] += kb[r * m2 + c] * du;
+                            }
+                        }
+                    }
+                    Dof::Inactive => {}
                 }
             }
         }
-        let k = SparseColMat::new_from_argsort(self.symbolic.clone(), &self.argsort, &values)
-            .expect("allocation of the stiffness matrix");
-        (k, coupling)
+        (SparseColMat::new(self.symbolic.clone(), values), coupling)
     }
 
     /// Assemble the reduced small-strain stiffness (lower triangle) of the
