@@ -520,6 +520,7 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
             pattern_reused,
             conditioning,
         }),
+        solver: None,
     })
 }
 

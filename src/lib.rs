@@ -43,6 +43,7 @@ pub mod report;
 pub mod runner;
 pub mod scene;
 pub mod simulation;
+pub mod solver;
 pub mod state;
 pub mod sweep;
 pub mod tui;

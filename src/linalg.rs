@@ -119,16 +119,44 @@ pub fn solve_lu(factor: &LuFactor, b: &[f64], transpose: bool) -> Vec<f64> {
 }
 
 /// 1-norm condition estimate `|A|_1 est(|A^-1|_1)` of a non-symmetric
-/// matrix (all entries stored) through its LU factor: Hager's method as
-/// refined by Higham (1988), at most 5 pairs of solves, plus Higham's
-/// alternating test vector as a lower bound. Lower bound on the true value,
-/// usually within a factor of 3.
+/// matrix (all entries stored) through its LU factor; see
+/// [`one_norm_estimate`].
 pub fn one_norm_condition(a: &SparseColMat<usize, f64>, factor: &LuFactor) -> Condition {
-    let n = a.nrows();
-    let (cp, v) = (a.col_ptr(), a.val());
-    let norm_a = (0..a.ncols())
-        .map(|c| v[cp[c]..cp[c + 1]].iter().map(|x| x.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
+    one_norm_estimate(
+        one_norm(a, false),
+        a.nrows(),
+        |x| solve_lu(factor, x, false),
+        |x| solve_lu(factor, x, true),
+    )
+}
+
+/// `|A|_1`, the largest column sum of `|a_ij|`, of a matrix with every
+/// entry stored or (`lower`) of a symmetric one given by its lower triangle.
+pub fn one_norm(a: &SparseColMat<usize, f64>, lower: bool) -> f64 {
+    let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
+    let mut sums = vec![0.0; a.ncols()];
+    for c in 0..a.ncols() {
+        for k in cp[c]..cp[c + 1] {
+            sums[c] += v[k].abs();
+            if lower && ri[k] != c {
+                sums[ri[k]] += v[k].abs();
+            }
+        }
+    }
+    sums.into_iter().fold(0.0, f64::max)
+}
+
+/// 1-norm condition estimate `|A|_1 est(|A^-1|_1)` of an `n x n` matrix
+/// from its norm and solves with `A` and `A^T` (the same for symmetric
+/// matrices): Hager's method as refined by Higham (1988), at most 5 pairs
+/// of solves, plus Higham's alternating test vector as a lower bound. Lower
+/// bound on the true value, usually within a factor of 3.
+pub fn one_norm_estimate(
+    norm_a: f64,
+    n: usize,
+    mut solve: impl FnMut(&[f64]) -> Vec<f64>,
+    mut solve_t: impl FnMut(&[f64]) -> Vec<f64>,
+) -> Condition {
     if n == 0 {
         return Condition {
             value: 1.0,
@@ -141,7 +169,7 @@ pub fn one_norm_condition(a: &SparseColMat<usize, f64>, factor: &LuFactor) -> Co
     let mut est = 0.0f64;
     let mut last_j = usize::MAX;
     for k in 0..5 {
-        let y = solve_lu(factor, &x, false);
+        let y = solve(&x);
         let y1: f64 = y.iter().map(|v| v.abs()).sum();
         if !y1.is_finite() {
             est = f64::INFINITY;
@@ -152,7 +180,7 @@ pub fn one_norm_condition(a: &SparseColMat<usize, f64>, factor: &LuFactor) -> Co
         }
         est = y1;
         let xi: Vec<f64> = y.iter().map(|v| if *v >= 0.0 { 1.0 } else { -1.0 }).collect();
-        let z = solve_lu(factor, &xi, true);
+        let z = solve_t(&xi);
         let (j, zmax) = z.iter().enumerate().fold(
             (0, 0.0f64),
             |(bj, bm), (i, v)| if v.abs() > bm { (i, v.abs()) } else { (bj, bm) },
@@ -172,7 +200,7 @@ pub fn one_norm_condition(a: &SparseColMat<usize, f64>, factor: &LuFactor) -> Co
             s * (1.0 + i as f64 / (n.max(2) - 1) as f64)
         })
         .collect();
-    let y = solve_lu(factor, &alt, false);
+    let y = solve(&alt);
     let alt_est = 2.0 * y.iter().map(|v| v.abs()).sum::<f64>() / (3.0 * n as f64);
     let inv = est.max(alt_est);
     Condition {
@@ -193,6 +221,13 @@ pub enum ConditionMethod {
     DenseLanczosInverse,
     /// Lanczos for `lambda_max` and Lanczos on the inverse for `lambda_min`.
     Lanczos,
+    /// Lanczos for `lambda_max` and on the inverse for `lambda_min`, each
+    /// stopped after at most [`ESTIMATE_ITERATIONS`] iterations or when the
+    /// Ritz value settles to [`ESTIMATE_TOLERANCE`]: the default above `dense_limit`
+    /// (a fifth or less of a step's time). The extreme Ritz values are lower
+    /// bounds of `lambda_max` and `1/lambda_min`, so the estimate is a lower
+    /// bound of the condition number, usually within a few percent.
+    Estimate,
     /// 1-norm estimate for non-symmetric tangents (`lambda_min` and
     /// `lambda_max` then hold `1/|A^-1|_1` and `|A|_1`).
     OneNormEstimate,
@@ -210,6 +245,7 @@ impl ConditionMethod {
             ConditionMethod::Dense => "dense",
             ConditionMethod::DenseLanczosInverse => "dense+lanczos-inv",
             ConditionMethod::Lanczos => "lanczos",
+            ConditionMethod::Estimate => "estimate",
             ConditionMethod::OneNormEstimate => "1-norm est",
             ConditionMethod::NotPositiveDefinite => "singular",
         }
@@ -242,48 +278,96 @@ pub fn dense_eigenvalues(a: &SparseColMat<usize, f64>) -> Option<Vec<f64>> {
     m.self_adjoint_eigenvalues(Side::Lower).ok()
 }
 
+/// Iterations of each Lanczos run of [`ConditionMethod::Estimate`] at most.
+pub const ESTIMATE_ITERATIONS: usize = 25;
+
+/// Relative change of the Ritz value that ends an estimate's Lanczos run
+/// (after at least 3 iterations). Lanczos converges geometrically at the
+/// ends of the spectrum, so the value is then within about this of its
+/// limit; the tests check the estimate against dense eigenvalues.
+pub const ESTIMATE_TOLERANCE: f64 = 1e-2;
+
+/// How to compute a condition number.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Eigen {
+    /// Dense eigenvalues (Lanczos on the inverse at the round-off floor).
+    Dense,
+    /// Lanczos to 1e-10 (at most 120 iterations) at both ends.
+    Lanczos,
+    /// Lanczos to [`ESTIMATE_TOLERANCE`] (at most [`ESTIMATE_ITERATIONS`])
+    /// at both ends.
+    Estimate,
+}
+
 /// Condition number of the SPD matrix `a` (lower triangle) with Cholesky
-/// factor `factor`: dense when `a` has at most `dense_limit` rows.
+/// factor `factor`: dense when `a` has at most `dense_limit` rows, Lanczos
+/// above.
 pub fn condition(a: &SparseColMat<usize, f64>, factor: &Factor, dense_limit: usize) -> Condition {
+    let how = if a.nrows() <= dense_limit {
+        Eigen::Dense
+    } else {
+        Eigen::Lanczos
+    };
+    condition_by(a, factor, how, &|| true).expect("never cancelled")
+}
+
+/// Condition number of the SPD matrix `a` (lower triangle) with Cholesky
+/// factor `factor`, computed as `how` says; `None` when `keep_going`
+/// (asked between iterations) returns `false`.
+pub fn condition_by(
+    a: &SparseColMat<usize, f64>,
+    factor: &Factor,
+    how: Eigen,
+    keep_going: &dyn Fn() -> bool,
+) -> Option<Condition> {
     let n = a.nrows();
     if n == 0 {
-        return Condition {
+        return Some(Condition {
             value: 1.0,
             lambda_min: 1.0,
             lambda_max: 1.0,
             method: ConditionMethod::Dense,
-        };
+        });
     }
-    let inverse_min = || 1.0 / lanczos_max(n, |x| solve(factor, x));
-    if n <= dense_limit {
+    let (iterations, tolerance, method) = match how {
+        Eigen::Estimate => (ESTIMATE_ITERATIONS, ESTIMATE_TOLERANCE, ConditionMethod::Estimate),
+        _ => (120, 1e-10, ConditionMethod::Lanczos),
+    };
+    let inverse_min = || lanczos_max_with(n, |x| solve(factor, x), iterations, tolerance, keep_going).map(|m| 1.0 / m);
+    if how == Eigen::Dense {
         if let Some(ev) = dense_eigenvalues(a) {
             let (lo, hi) = (ev[0], ev[n - 1]);
             // Dense eigenvalues are accurate to about n eps lambda_max.
             if lo > 1e-10 * hi {
-                return Condition {
+                return Some(Condition {
                     value: hi / lo,
                     lambda_min: lo,
                     lambda_max: hi,
                     method: ConditionMethod::Dense,
-                };
+                });
             }
-            let lo = inverse_min();
-            return Condition {
+            let lo = inverse_min()?;
+            return Some(Condition {
                 value: hi / lo,
                 lambda_min: lo,
                 lambda_max: hi,
                 method: ConditionMethod::DenseLanczosInverse,
-            };
+            });
         }
     }
-    let hi = lanczos_max(n, |x| sym_lower_mul(a, x));
-    let lo = inverse_min();
-    Condition {
+    let hi = match how {
+        // Products with `A` are cheap, its top spectrum is clustered: many
+        // iterations of the three-term recurrence, no basis kept.
+        Eigen::Estimate => lanczos_max_short(n, |x| sym_lower_mul(a, x), 200, 1e-3, keep_going)?,
+        _ => lanczos_max_with(n, |x| sym_lower_mul(a, x), iterations, tolerance, keep_going)?,
+    };
+    let lo = inverse_min()?;
+    Some(Condition {
         value: hi / lo,
         lambda_min: lo,
         lambda_max: hi,
-        method: ConditionMethod::Lanczos,
-    }
+        method,
+    })
 }
 
 /// A reproducible pseudo-random sequence (xorshift64) for start vectors and
@@ -314,6 +398,19 @@ impl XorShift {
 /// are reproducible). Stops when the largest Ritz value settles to 1e-10
 /// relative or after 120 iterations.
 pub fn lanczos_max(n: usize, op: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
+    lanczos_max_with(n, op, 120, 1e-10, &|| true).expect("never cancelled")
+}
+
+/// [`lanczos_max`] stopped after `max_iter` iterations or when the Ritz
+/// value settles to `tolerance` relative; `None` when `keep_going`, asked
+/// before each iteration, returns `false`.
+pub fn lanczos_max_with(
+    n: usize,
+    op: impl Fn(&[f64]) -> Vec<f64>,
+    max_iter: usize,
+    tolerance: f64,
+    keep_going: &dyn Fn() -> bool,
+) -> Option<f64> {
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let mut rand = XorShift::new(0x2545_f491_4f6c_dd1d);
     let mut q: Vec<f64> = (0..n).map(|_| rand.unit() + 0.5).collect();
@@ -322,8 +419,11 @@ pub fn lanczos_max(n: usize, op: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
     let mut basis: Vec<Vec<f64>> = vec![q];
     let (mut alpha, mut beta) = (Vec::new(), Vec::<f64>::new());
     let mut last = f64::NAN;
-    let max_iter = n.min(120);
+    let max_iter = n.min(max_iter);
     for j in 0..max_iter {
+        if !keep_going() {
+            return None;
+        }
         let mut w = op(&basis[j]);
         alpha.push(dot(&w, &basis[j]));
         // Full reorthogonalisation, twice for safety.
@@ -337,16 +437,71 @@ pub fn lanczos_max(n: usize, op: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
         let ritz = tridiagonal_max(&alpha, &beta);
         let scale = alpha.iter().fold(0.0f64, |m, a| m.max(a.abs()));
         if bnorm <= 1e-14 * scale || j + 1 == max_iter {
-            return ritz;
+            return Some(ritz);
         }
-        if j >= 4 && (ritz - last).abs() <= 1e-10 * ritz.abs() {
-            return ritz;
+        // At least 5 iterations to the 1e-10 of full runs, 3 for estimates.
+        let least = if tolerance < 1e-6 { 4 } else { 2 };
+        if j >= least && (ritz - last).abs() <= tolerance * ritz.abs() {
+            return Some(ritz);
         }
         last = ritz;
         beta.push(bnorm);
         basis.push(w.into_iter().map(|v| v / bnorm).collect());
     }
-    last
+    Some(last)
+}
+
+/// Largest eigenvalue of a symmetric operator by the plain three-term
+/// Lanczos recurrence (only the last two vectors kept, each new one
+/// orthogonalised against them): memory `O(n)` and time `O(n)` per
+/// iteration. Losing orthogonality only repeats converged Ritz values; the
+/// largest stays a lower bound of `lambda_max` that converges to it. Stops
+/// after `max_iter` iterations or when the Ritz value (checked every 5)
+/// settles to `tolerance`; `None` when `keep_going` returns `false`.
+pub fn lanczos_max_short(
+    n: usize,
+    op: impl Fn(&[f64]) -> Vec<f64>,
+    max_iter: usize,
+    tolerance: f64,
+    keep_going: &dyn Fn() -> bool,
+) -> Option<f64> {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut rand = XorShift::new(0x2545_f491_4f6c_dd1d);
+    let mut q: Vec<f64> = (0..n).map(|_| rand.unit() + 0.5).collect();
+    let nq = dot(&q, &q).sqrt();
+    q.iter_mut().for_each(|v| *v /= nq);
+    let mut prev = vec![0.0; n];
+    let (mut alpha, mut beta) = (Vec::new(), Vec::<f64>::new());
+    let mut last = f64::NAN;
+    let max_iter = n.min(max_iter);
+    for j in 0..max_iter {
+        if !keep_going() {
+            return None;
+        }
+        let mut w = op(&q);
+        let b_prev = beta.last().copied().unwrap_or(0.0);
+        w.iter_mut().zip(&prev).for_each(|(wi, pi)| *wi -= b_prev * pi);
+        let a = dot(&w, &q);
+        alpha.push(a);
+        w.iter_mut().zip(&q).for_each(|(wi, qi)| *wi -= a * qi);
+        for v in [&q, &prev] {
+            let c = dot(&w, v);
+            w.iter_mut().zip(v.iter()).for_each(|(wi, vi)| *wi -= c * vi);
+        }
+        let bnorm = dot(&w, &w).sqrt();
+        let scale = alpha.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        let done = bnorm <= 1e-14 * scale || j + 1 == max_iter;
+        if done || (j >= 4 && j % 5 == 4) {
+            let ritz = tridiagonal_max(&alpha, &beta);
+            if done || (ritz - last).abs() <= tolerance * ritz.abs() {
+                return Some(ritz);
+            }
+            last = ritz;
+        }
+        beta.push(bnorm);
+        prev = std::mem::replace(&mut q, w.into_iter().map(|v| v / bnorm).collect());
+    }
+    Some(last)
 }
 
 /// Largest eigenvalue of the symmetric tridiagonal matrix with diagonal
@@ -365,4 +520,39 @@ fn tridiagonal_max(alpha: &[f64], beta: &[f64]) -> f64 {
         }
     });
     t.self_adjoint_eigenvalues(Side::Lower).map_or(f64::NAN, |ev| ev[m - 1])
+}
+
+/// Largest `|a_ij - a_ji|` over the largest `|a_ij|` of a matrix with every
+/// entry stored (0 for a symmetric matrix).
+pub fn asymmetry(a: &SparseColMat<usize, f64>) -> f64 {
+    let t = a.as_ref().transpose().to_col_major().expect("transpose");
+    let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
+    let (tcp, tri, tv) = (t.col_ptr(), t.row_idx(), t.val());
+    let mut big = 0.0f64;
+    let mut diff = 0.0f64;
+    for c in 0..a.ncols() {
+        let (mut i, mut j) = (cp[c], tcp[c]);
+        while i < cp[c + 1] || j < tcp[c + 1] {
+            let ra = if i < cp[c + 1] { ri[i] } else { usize::MAX };
+            let rt = if j < tcp[c + 1] { tri[j] } else { usize::MAX };
+            let (x, y) = if ra == rt {
+                i += 1;
+                j += 1;
+                (v[i - 1], tv[j - 1])
+            } else if ra < rt {
+                i += 1;
+                (v[i - 1], 0.0)
+            } else {
+                j += 1;
+                (0.0, tv[j - 1])
+            };
+            big = big.max(x.abs());
+            diff = diff.max((x - y).abs());
+        }
+    }
+    if big > 0.0 {
+        diff / big
+    } else {
+        0.0
+    }
 }

@@ -18,7 +18,7 @@ use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::geometry::P2;
 use crate::ghost;
 use crate::ibm::{self, IbmReport, IbmStep};
-use crate::linalg::{self, Condition};
+use crate::linalg::{self, Condition, Eigen};
 use crate::material::mul3;
 use crate::points::Points;
 use crate::report::{Energy, StepFailure, StepReport, Timings};
@@ -38,10 +38,11 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     // 1. Map the points and collect the contributions (implicit boundaries'
     //    d^a, band and f_d; ghost faces); the pattern once.
     let ibm_now = sim.ibm_boundaries_now(step)?;
-    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1)?;
+    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1, &mut timings)?;
     // 2. Assemble K and the right-hand side.
+    let t = Instant::now();
     let system = assemble(&setup)?;
-    timings.assembly = start.elapsed().as_secs_f64();
+    timings.assembly = t.elapsed().as_secs_f64();
     // 3. Factorise (sparse Cholesky).
     let t = Instant::now();
     let factor = linalg::cholesky(&system.k).map_err(|e| StepFailure::Singular {
@@ -55,9 +56,11 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     timings.solve = t.elapsed().as_secs_f64();
     // 5. Condition numbers of the reduced stiffness.
     let t = Instant::now();
-    let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor);
+    let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor, &residuals)?;
     timings.condition = t.elapsed().as_secs_f64();
-    // 6. Update the points; work and stored energy.
+    // 6. Update the points; work and stored energy (the factor and the
+    //    matrix are no longer needed: free them before the points are copied).
+    drop(factor);
     let t = Instant::now();
     let updated = update(&setup, &system, &du, &residuals)?;
     timings.update = t.elapsed().as_secs_f64();
@@ -96,6 +99,12 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         max_increment: updated.max_increment,
         boundaries: system.boundaries,
         dynamics: None,
+        solver: Some(crate::report::SolverReport {
+            factorisation: Some(crate::solver::FactorKind::Cholesky),
+            negative_pivots: Some(0),
+            cutbacks: Vec::new(),
+            substeps: 1,
+        }),
     })
 }
 
@@ -131,7 +140,9 @@ impl<'a> Setup<'a> {
         step: usize,
         lambda0: f64,
         lambda1: f64,
+        timings: &mut Timings,
     ) -> Result<Setup<'a>, StepFailure> {
+        let start = Instant::now();
         let grid = &sim.model.grid;
         let pts = &sim.state.points;
         let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0);
@@ -181,7 +192,10 @@ impl<'a> Setup<'a> {
         } else {
             Vec::new()
         };
+        timings.mapping = start.elapsed().as_secs_f64();
+        let t = Instant::now();
         let pattern = Pattern::new(&map.dofs, &linear_blocks(&map, &band, &faces), Storage::Lower);
+        timings.pattern = t.elapsed().as_secs_f64();
         Ok(Setup {
             sim,
             step,
@@ -336,35 +350,48 @@ fn solve(setup: &Setup, system: &System, factor: &linalg::Factor) -> Result<(Vec
 
 /// Condition number of the reduced stiffness, and without the ghost term
 /// for comparison (infinite when singular).
-fn conditioning(setup: &Setup, system: &System, factor: &linalg::Factor) -> (Option<Condition>, Option<Condition>) {
-    let params = &setup.sim.params;
+/// Condition numbers of the stiffness with and without the ghost term:
+/// dense eigenvalues up to `dense_limit` unknowns, the Lanczos estimate
+/// above (`auto`), or what the scene asks. Cancelled with the step when the
+/// observer's stop flag is set.
+fn conditioning(
+    setup: &Setup,
+    system: &System,
+    factor: &linalg::Factor,
+    residuals: &[f64],
+) -> Result<(Option<Condition>, Option<Condition>), StepFailure> {
+    let sim = setup.sim;
+    let params = &sim.params;
     let k = &system.k;
-    let condition = match params.condition {
+    let how = |n: usize| match params.condition {
+        ConditionMode::Auto if n <= params.dense_limit => Some(Eigen::Dense),
+        ConditionMode::Auto => Some(Eigen::Estimate),
+        ConditionMode::Dense => Some(Eigen::Dense),
+        ConditionMode::Lanczos => Some(Eigen::Lanczos),
         ConditionMode::Off => None,
-        ConditionMode::Auto => Some(linalg::condition(k, factor, params.dense_limit)),
-        ConditionMode::Dense => Some(linalg::condition(k, factor, usize::MAX)),
-        ConditionMode::Lanczos => Some(linalg::condition(k, factor, 0)),
     };
-    let condition_unstabilised = match (&condition, setup.faces.is_empty()) {
-        (Some(c), false) => {
-            let (k0, _) = setup.stiffness(false);
-            let limit = match params.condition {
-                ConditionMode::Dense => usize::MAX,
-                ConditionMode::Lanczos => 0,
-                _ => params.dense_limit,
-            };
-            Some(match linalg::cholesky(&k0) {
-                Ok(f0) => linalg::condition(&k0, &f0, limit),
-                Err(_) => Condition {
-                    value: f64::INFINITY,
-                    lambda_min: 0.0,
-                    ..*c
-                },
-            })
-        }
-        _ => None,
+    let cancelled = || StepFailure::Cancelled {
+        step: setup.step,
+        residuals: residuals.to_vec(),
     };
-    (condition, condition_unstabilised)
+    let keep_going = || !sim.cancelled();
+    let Some(how) = how(k.nrows()) else {
+        return Ok((None, None));
+    };
+    let c = linalg::condition_by(k, factor, how, &keep_going).ok_or_else(cancelled)?;
+    if setup.faces.is_empty() {
+        return Ok((Some(c), None));
+    }
+    let (k0, _) = setup.stiffness(false);
+    let c0 = match linalg::cholesky(&k0) {
+        Ok(f0) => linalg::condition_by(&k0, &f0, how, &keep_going).ok_or_else(cancelled)?,
+        Err(_) => Condition {
+            value: f64::INFINITY,
+            lambda_min: 0.0,
+            ..c
+        },
+    };
+    Ok((Some(c), Some(c0)))
 }
 
 /// The points after a step, and what the step did.

@@ -333,11 +333,28 @@ fn header(first: Option<&StepReport>) -> String {
     for e in first.map(|r| r.errors.as_slice()).unwrap_or(&[]) {
         h.push_str(&format!(" {:>15}", e.name));
     }
+    h.push_str(&format!(" {:>9} {:>4}", "factor", "cuts"));
     h.push_str(&format!(
-        " {:>8} {:>8} {:>8} {:>8}",
-        "asm s", "fact s", "solve s", "total s"
+        " {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>8}",
+        "map s", "pat s", "asm s", "fact s", "solve s", "cond s", "upd s", "total s"
     ));
     h
+}
+
+/// The factorisation of the step's last system and the tangent's inertia:
+/// `chol`, `ldlt-3` (3 negative pivots: 3 negative eigenvalues), `lu`.
+fn factor_label(r: &StepReport) -> String {
+    use mpmlab::solver::FactorKind;
+    match r
+        .solver
+        .as_ref()
+        .and_then(|s| s.factorisation.map(|f| (f, s.negative_pivots)))
+    {
+        None => "-".into(),
+        Some((FactorKind::Cholesky, _)) => "chol".into(),
+        Some((FactorKind::Ldlt, n)) => format!("ldlt-{}", n.unwrap_or(0)),
+        Some((FactorKind::Lu, _)) => "lu".into(),
+    }
 }
 
 fn row(r: &StepReport) -> String {
@@ -362,10 +379,12 @@ fn row(r: &StepReport) -> String {
     for e in &r.errors {
         s.push_str(&format!(" {:>15.4e}", e.value));
     }
+    let cuts = r.solver.as_ref().map_or(0, |s| s.cutbacks.len());
+    s.push_str(&format!(" {:>9} {:>4}", factor_label(r), cuts));
     let t = &r.timings;
     s.push_str(&format!(
-        " {:>8.4} {:>8.4} {:>8.4} {:>8.4}",
-        t.assembly, t.factorisation, t.solve, t.total
+        " {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>8.4}",
+        t.mapping, t.pattern, t.assembly, t.factorisation, t.solve, t.condition, t.update, t.total
     ));
     s
 }
@@ -386,6 +405,15 @@ impl Observer for Table {
                 _ => {}
             }
             out!("{}", if r.dynamics.is_some() { dynamics_row(r) } else { row(r) });
+        }
+        for c in r.solver.iter().flat_map(|s| &s.cutbacks) {
+            out!(
+                "       cutback in step {}: the increment lambda {:.6} -> {:.6} failed and was halved: {}",
+                r.step,
+                c.from,
+                c.to,
+                c.reason
+            );
         }
         self.total_time += r.timings.total;
         self.last = Some(r.clone());
@@ -421,7 +449,7 @@ fn run(path: &Path, record: Option<&Path>, force: bool, quiet: bool, limits: &Li
         m.grid.nx,
         m.grid.ny,
         m.grid.h,
-        m.points.len(),
+        sim.points().len(),
         m.analysis.load_steps
     );
     let mut code = ExitCode::SUCCESS;

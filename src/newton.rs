@@ -40,8 +40,9 @@ use crate::ghost::{self, GhostFace};
 use crate::ibm::{self, BandBlock, GradOp, IbmBoundary, IbmStep};
 use crate::kinematics::{commit_point, increment_gradient};
 use crate::linalg::{self, Condition};
-use crate::report::{Energy, StepFailure, StepReport, Timings};
+use crate::report::{Cutback, Energy, SolverReport, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
+use crate::solver::{Factorisation, Symbolic, Symmetry};
 use crate::state::Simulation;
 use faer::sparse::SparseColMat;
 use std::time::Instant;
@@ -50,15 +51,48 @@ fn norm(v: &[f64]) -> f64 {
     v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
-fn condition_of(k: &SparseColMat<usize, f64>) -> Condition {
-    match linalg::lu_symbolic(k).and_then(|s| linalg::lu(&s, k)) {
-        Ok(f) => linalg::one_norm_condition(k, &f),
-        Err(_) => Condition {
-            value: f64::INFINITY,
-            lambda_min: 0.0,
-            lambda_max: f64::NAN,
-            method: linalg::ConditionMethod::OneNormEstimate,
+/// 1-norm condition estimate of a tangent through its factorisation
+/// (Hager-Higham: a handful of solves on the factor already computed).
+fn condition_with(k: &SparseColMat<usize, f64>, symmetry: Symmetry, f: &mut Factorisation) -> Condition {
+    let norm = linalg::one_norm(k, symmetry == Symmetry::Symmetric);
+    let failed = std::cell::Cell::new(false);
+    let solve = |x: &[f64], f: &mut Factorisation| {
+        f.solve(x).unwrap_or_else(|_| {
+            failed.set(true);
+            vec![f64::INFINITY; x.len()]
+        })
+    };
+    let f = std::cell::RefCell::new(f);
+    let c = linalg::one_norm_estimate(
+        norm,
+        k.nrows(),
+        |x| solve(x, &mut f.borrow_mut()),
+        |x| match symmetry {
+            Symmetry::Symmetric => solve(x, &mut f.borrow_mut()),
+            Symmetry::General => f.borrow().solve_transpose(x),
         },
+    );
+    if failed.get() {
+        return infinite_condition();
+    }
+    c
+}
+
+fn infinite_condition() -> Condition {
+    Condition {
+        value: f64::INFINITY,
+        lambda_min: 0.0,
+        lambda_max: f64::NAN,
+        method: linalg::ConditionMethod::OneNormEstimate,
+    }
+}
+
+/// The condition estimate of a tangent not factorised yet (the one without
+/// the ghost term).
+fn condition_of(k: &SparseColMat<usize, f64>, symmetry: Symmetry) -> Condition {
+    match Symbolic::new(k, symmetry).and_then(|s| Factorisation::new(&s, k)) {
+        Ok(mut f) => condition_with(k, symmetry, &mut f),
+        Err(_) => infinite_condition(),
     }
 }
 
@@ -121,6 +155,8 @@ struct Setup<'a> {
     sim: &'a Simulation,
     step: usize,
     lambda: f64,
+    /// Load factor at the start of the increment.
+    lambda0: f64,
     map: Mapping,
     faces: Vec<GhostFace>,
     gamma: f64,
@@ -134,6 +170,9 @@ struct Setup<'a> {
     /// Each boundary at the start of the step, for the report.
     boundaries: Vec<BoundaryReport>,
     loads: Vec<LoadBlock>,
+    /// Symmetric unless a contribution is not (follower tractions' load
+    /// stiffness, F-bar): decides the storage and the factorisation.
+    symmetry: Symmetry,
     pattern: Pattern,
 }
 
@@ -156,7 +195,9 @@ impl<'a> Setup<'a> {
         step: usize,
         lambda0: f64,
         lambda1: f64,
+        timings: &mut Timings,
     ) -> Result<Setup<'a>, StepFailure> {
+        let start = Instant::now();
         let model = &sim.model;
         let grid = &model.grid;
         let pts = &sim.state.points;
@@ -204,6 +245,7 @@ impl<'a> Setup<'a> {
                 f_d,
             })
         };
+        let mapping = start.elapsed().as_secs_f64();
         // Dead loads (body forces and point loads) at lambda; the loads at
         // the start of the step with the tractions on the curves then (for
         // the work's trapezoidal rule) and each boundary as it is then.
@@ -244,11 +286,26 @@ impl<'a> Setup<'a> {
             nodes.dedup();
             loads.push(LoadBlock { boundary: k, nodes });
         }
-        let pattern = Pattern::new(&map.dofs, &newton_blocks(&map, &faces, &band, &loads), Storage::Full);
+        let symmetry = if sim.model.analysis.fbar || !loads.is_empty() {
+            Symmetry::General
+        } else {
+            Symmetry::Symmetric
+        };
+        let storage = match symmetry {
+            Symmetry::Symmetric => Storage::Lower,
+            Symmetry::General => Storage::Full,
+        };
+        let t = Instant::now();
+        let pattern = Pattern::new(&map.dofs, &newton_blocks(&map, &faces, &band, &loads), storage);
+        let pattern_time = t.elapsed().as_secs_f64();
+        timings.mapping += mapping;
+        timings.pattern += pattern_time;
+        timings.assembly += start.elapsed().as_secs_f64() - pattern_time - mapping;
         Ok(Setup {
             sim,
             step,
             lambda: lambda1,
+            lambda0,
             map,
             faces,
             gamma,
@@ -257,6 +314,7 @@ impl<'a> Setup<'a> {
             start_loads,
             boundaries,
             loads,
+            symmetry,
             pattern,
         })
     }
@@ -443,27 +501,137 @@ impl<'a> Setup<'a> {
     }
 }
 
-/// One finite-deformation load step: each phase is a function below.
+/// One finite-deformation load step from `lambda_n` to `lambda_{n+1}`: one
+/// increment, or, when it fails, the increment cut back (halved and retried
+/// from the last converged state, at most `analysis.max_cutbacks` times in
+/// a row, growing back after easy increments; see [`cut_back`]).
 pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let steps = sim.load_steps();
     let (lambda0, lambda1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
+    match increment(sim, step, lambda0, lambda1, true) {
+        Err(e) if sim.model.analysis.max_cutbacks > 0 && can_cut_back(&e) => cut_back(sim, step, lambda0, lambda1, e),
+        other => other,
+    }
+}
+
+/// Failures a smaller increment may avoid: Newton not converging, non-finite
+/// values, a singular tangent, points pushed out of the grid.
+fn can_cut_back(e: &StepFailure) -> bool {
+    matches!(
+        e,
+        StepFailure::NotConverged { .. }
+            | StepFailure::NonFinite { .. }
+            | StepFailure::Singular { .. }
+            | StepFailure::LeftGrid { .. }
+    )
+}
+
+/// Cut the increment `lambda0 -> lambda1` back after `failure`: halve it
+/// and retry from the last converged state; after an increment that
+/// converged in at most half the iteration limit, double it again (never
+/// past `lambda1`). More than `max_cutbacks` halvings in a row end the step
+/// with the last failure, and the state returns to the start of the step.
+/// Every cutback is in the step's [`SolverReport`].
+fn cut_back(
+    sim: &mut Simulation,
+    step: usize,
+    lambda0: f64,
+    lambda1: f64,
+    failure: StepFailure,
+) -> Result<StepReport, StepFailure> {
+    let max = sim.model.analysis.max_cutbacks;
+    let start = sim.snapshot();
+    let mut cutbacks = vec![Cutback {
+        from: lambda0,
+        to: lambda1,
+        reason: failure.to_string(),
+    }];
+    let (mut at, mut size, mut depth) = (lambda0, 0.5 * (lambda1 - lambda0), 1);
+    let mut substeps = 0;
+    let (mut iterations, mut timings) = (0, Timings::default());
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| loop {
+        // The last increment lands exactly on lambda1.
+        let last = at + size >= lambda1 - 1e-12 * (lambda1 - lambda0);
+        let to = if last { lambda1 } else { at + size };
+        match increment(sim, step, at, to, last) {
+            Ok(mut r) => {
+                substeps += 1;
+                iterations += r.iterations;
+                timings.add(&r.timings);
+                if last {
+                    r.iterations = iterations;
+                    r.timings = timings;
+                    if let Some(s) = r.solver.as_mut() {
+                        s.cutbacks = std::mem::take(&mut cutbacks);
+                        s.substeps = substeps;
+                    }
+                    return Ok(r);
+                }
+                at = to;
+                if r.iterations * 2 <= sim.params.max_iterations && depth > 0 {
+                    size *= 2.0;
+                    depth -= 1;
+                }
+            }
+            Err(e) if can_cut_back(&e) && depth < max => {
+                cutbacks.push(Cutback {
+                    from: at,
+                    to,
+                    reason: e.to_string(),
+                });
+                size *= 0.5;
+                depth += 1;
+            }
+            Err(e) => return Err(e),
+        }
+    }));
+    let outcome = outcome.unwrap_or_else(|e| {
+        Err(StepFailure::Internal {
+            step,
+            message: crate::simulation::panic_message(e.as_ref()),
+        })
+    });
+    if outcome.is_err() {
+        sim.restore(&start);
+    }
+    outcome
+}
+
+/// One increment `lambda0 -> lambda1` of load step `step`, committed with
+/// the step's number when it is the step's `last` (else the state keeps the
+/// previous step's number, at the load factor reached): each phase is a
+/// function below.
+fn increment(
+    sim: &mut Simulation,
+    step: usize,
+    lambda0: f64,
+    lambda1: f64,
+    last: bool,
+) -> Result<StepReport, StepFailure> {
+    let steps = sim.load_steps();
     let start = Instant::now();
     let mut timings = Timings::default();
 
     // 1. Map the points and collect every method's contribution; the loads
     //    at the start of the step (for the work) and the boundaries then.
     let ibm_now = sim.ibm_boundaries_now(step)?;
-    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1)?;
-    timings.assembly += start.elapsed().as_secs_f64();
+    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1, &mut timings)?;
     // 2. Newton on the nodal unknowns.
-    let solved = newton(&setup, &mut timings)?;
-    // 3. Condition numbers of the last tangent.
+    let mut solved = newton(&setup, &mut timings)?;
+    // 3. Condition numbers of the last tangent (of the step's last
+    //    increment).
     let t = Instant::now();
-    let (condition, condition_unstabilised) = conditioning(&setup, &solved)?;
+    let (condition, condition_unstabilised) = if last {
+        conditioning(&setup, &mut solved)?
+    } else {
+        (None, None)
+    };
     timings.condition = t.elapsed().as_secs_f64();
     // 4. The points' new state, the work of loads and supports, and the
-    //    implicit boundaries' reactions.
+    //    implicit boundaries' reactions (the last tangent and its factor
+    //    are freed first: the points are copied).
+    let factor = solved.last.take().map(|(_, f)| (f.kind(), f.negative_pivots()));
     let t = Instant::now();
     let updated = update(&setup, &solved)?;
     timings.update = t.elapsed().as_secs_f64();
@@ -476,7 +644,7 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let work = updated.work;
     sim.commit_quasi_static(
         updated.points,
-        step,
+        if last { step } else { step - 1 },
         work,
         active,
         &faces,
@@ -510,6 +678,12 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
         max_increment: updated.max_increment,
         boundaries,
         dynamics: None,
+        solver: Some(SolverReport {
+            factorisation: factor.map(|f| f.0),
+            negative_pivots: factor.and_then(|f| f.1),
+            cutbacks: Vec::new(),
+            substeps: 1,
+        }),
     })
 }
 
@@ -522,13 +696,15 @@ struct Solved {
     /// Relative residual of every iteration.
     residuals: Vec<f64>,
     iterations: usize,
-    /// The last tangent and its LU factor (for the condition number).
-    last: Option<(SparseColMat<usize, f64>, linalg::LuFactor)>,
+    /// The last tangent and its factorisation (for the condition number,
+    /// the factorisation used and the inertia).
+    last: Option<(SparseColMat<usize, f64>, Factorisation)>,
 }
 
-/// Newton-Raphson on the step's residual: tangent, sparse LU (symbolic
-/// analysis reused), full correction, until the relative residual is below
-/// the tolerance.
+/// Newton-Raphson on the step's residual: tangent, factorisation by
+/// structure ([`crate::solver`]: Cholesky, `L D L^T` or LU, the symbolic
+/// analysis reused by every iteration), full correction, until the relative
+/// residual is below the tolerance.
 fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
     let (sim, step, map) = (setup.sim, setup.step, &setup.map);
     let params = &sim.params;
@@ -577,19 +753,17 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
         let k = setup.tangent(&res, &d, setup.gamma)?;
         timings.assembly += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        if symbolic.is_none() {
-            symbolic = Some(linalg::lu_symbolic(&k).map_err(|e| StepFailure::Singular {
-                step,
-                reason: e.to_string(),
-            })?);
-        }
-        let lu = linalg::lu(symbolic.as_ref().expect("set above"), &k).map_err(|e| StepFailure::Singular {
+        let singular = |e: linalg::FactorError| StepFailure::Singular {
             step,
             reason: e.to_string(),
-        })?;
+        };
+        if symbolic.is_none() {
+            symbolic = Some(Symbolic::new(&k, setup.symmetry).map_err(singular)?);
+        }
+        let mut factor = Factorisation::new(symbolic.as_ref().expect("set above"), &k).map_err(singular)?;
         timings.factorisation += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let dd = linalg::solve_lu(&lu, &res.r, false);
+        let dd = factor.solve(&res.r).map_err(singular)?;
         timings.solve += t.elapsed().as_secs_f64();
         if dd.iter().any(|v| !v.is_finite()) {
             return Err(StepFailure::Singular {
@@ -622,25 +796,28 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
             alpha *= 0.5;
         }
         timings.assembly += t.elapsed().as_secs_f64();
-        last = Some((k, lu));
+        last = Some((k, factor));
         iterations += 1;
     }
 }
 
 /// Condition numbers of the last tangent, with and without the ghost term
 /// (1-norm estimates through the LU factor).
-fn conditioning(setup: &Setup, solved: &Solved) -> Result<(Option<Condition>, Option<Condition>), StepFailure> {
+fn conditioning(setup: &Setup, solved: &mut Solved) -> Result<(Option<Condition>, Option<Condition>), StepFailure> {
     if setup.sim.params.condition == ConditionMode::Off || setup.map.dofs.n_free == 0 {
         return Ok((None, None));
     }
-    let with = match &solved.last {
-        Some((k, lu)) => linalg::one_norm_condition(k, lu),
-        None => condition_of(&setup.tangent(&solved.res, &solved.d, setup.gamma)?),
+    let with = match &mut solved.last {
+        Some((k, f)) => condition_with(k, setup.symmetry, f),
+        None => condition_of(&setup.tangent(&solved.res, &solved.d, setup.gamma)?, setup.symmetry),
     };
     let without = if setup.faces.is_empty() {
         None
     } else {
-        Some(condition_of(&setup.tangent(&solved.res, &solved.d, 0.0)?))
+        Some(condition_of(
+            &setup.tangent(&solved.res, &solved.d, 0.0)?,
+            setup.symmetry,
+        ))
     };
     Ok((Some(with), without))
 }
@@ -665,8 +842,7 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
     let (sim, map, d) = (setup.sim, &setup.map, &solved.d);
     let (res, it) = (&solved.res, &solved.res.it);
     let lambda1 = setup.lambda;
-    let steps = sim.load_steps() as f64;
-    let lambda0 = (setup.step - 1) as f64 / steps;
+    let lambda0 = setup.lambda0;
     let mut pts = sim.state.points.clone();
     let (mut strain_energy, mut dissipation) = (0.0, 0.0);
     let total: Vec<P2> = (0..d.len())
@@ -758,7 +934,7 @@ pub(crate) fn tangent_check(sim: &Simulation, amplitude: f64) -> Result<f64, Ste
     let steps = sim.load_steps();
     let ibm_now = sim.ibm_boundaries_now(step)?;
     let (l0, l1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
-    let setup = Setup::new(sim, &ibm_now, step, l0, l1)?;
+    let setup = Setup::new(sim, &ibm_now, step, l0, l1, &mut Timings::default())?;
     let map = &setup.map;
     let mut rand = crate::linalg::XorShift::new(0x9e37_79b9_7f4a_7c15);
     let h = sim.model.grid.h;
@@ -779,12 +955,18 @@ pub(crate) fn tangent_check(sim: &Simulation, amplitude: f64) -> Result<f64, Ste
     let mut worst = 0.0f64;
     for _ in 0..4 {
         let v: Vec<f64> = (0..map.dofs.n_free).map(|_| rand.centred()).collect();
-        let mut kv = vec![0.0; map.dofs.n_free];
-        for c in 0..k.ncols() {
-            for idx in cp[c]..cp[c + 1] {
-                kv[ri[idx]] += val[idx] * v[c];
+        let kv = match setup.symmetry {
+            Symmetry::Symmetric => linalg::sym_lower_mul(&k, &v),
+            Symmetry::General => {
+                let mut kv = vec![0.0; map.dofs.n_free];
+                for c in 0..k.ncols() {
+                    for idx in cp[c]..cp[c + 1] {
+                        kv[ri[idx]] += val[idx] * v[c];
+                    }
+                }
+                kv
             }
-        }
+        };
         let eps = 1e-6 * h;
         let shifted = |sign: f64| -> Result<Vec<f64>, StepFailure> {
             let mut s = d.clone();

@@ -48,6 +48,26 @@ impl Points {
         self.x.is_empty()
     }
 
+    /// Release the spare capacity left by pushing the points one by one.
+    pub fn shrink_to_fit(&mut self) {
+        self.x.shrink_to_fit();
+        self.x0.shrink_to_fit();
+        self.vol.shrink_to_fit();
+        self.vol0.shrink_to_fit();
+        self.mass.shrink_to_fit();
+        self.stress.shrink_to_fit();
+        self.strain.shrink_to_fit();
+        self.lp.shrink_to_fit();
+        self.body.shrink_to_fit();
+        self.def_grad.shrink_to_fit();
+        self.b_e.shrink_to_fit();
+        self.szz.shrink_to_fit();
+        self.dissipation.shrink_to_fit();
+        self.yielding.shrink_to_fit();
+        self.lp0.shrink_to_fit();
+        self.v.shrink_to_fit();
+    }
+
     /// Displacement since generation (m).
     pub fn displacement(&self, p: usize) -> P2 {
         [self.x[p][0] - self.x0[p][0], self.x[p][1] - self.x0[p][1]]

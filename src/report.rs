@@ -10,15 +10,48 @@ use crate::linalg::Condition;
 use crate::scene::{MassKind, StressUpdate, VelocityUpdate};
 use std::fmt;
 
-/// Wall-clock time of each phase of a step (s).
+/// Wall-clock time of each phase of a step (s). The phases account for the
+/// step's `total` up to bookkeeping (reports, commits).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
+    /// Points to grid: stencils, active nodes, dofs (and, for implicit
+    /// boundaries, the band and its operators).
+    pub mapping: f64,
+    /// The sparsity pattern of the system (once per step).
+    pub pattern: f64,
+    /// Residuals, tangents, stiffness and mass values.
     pub assembly: f64,
     pub factorisation: f64,
     pub solve: f64,
     pub condition: f64,
     pub update: f64,
     pub total: f64,
+}
+
+impl Timings {
+    /// Add another increment's times (load-step cutbacks).
+    pub fn add(&mut self, o: &Timings) {
+        self.mapping += o.mapping;
+        self.pattern += o.pattern;
+        self.assembly += o.assembly;
+        self.factorisation += o.factorisation;
+        self.solve += o.solve;
+        self.condition += o.condition;
+        self.update += o.update;
+        self.total += o.total;
+    }
+
+    /// The time not in any phase (s).
+    pub fn other(&self) -> f64 {
+        self.total
+            - (self.mapping
+                + self.pattern
+                + self.assembly
+                + self.factorisation
+                + self.solve
+                + self.condition
+                + self.update)
+    }
 }
 
 /// Energies after a step (J per unit thickness).
@@ -71,6 +104,38 @@ pub struct StepReport {
     pub boundaries: Vec<BoundaryReport>,
     /// Explicit dynamics: time, energy balance, mass conditioning.
     pub dynamics: Option<DynamicsReport>,
+    /// Implicit steps: which factorisation solved the last system, the
+    /// inertia of the last tangent, and the load-step cutbacks taken.
+    pub solver: Option<SolverReport>,
+}
+
+/// How an implicit step's systems were solved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolverReport {
+    /// The factorisation of the last system solved ([`crate::solver`];
+    /// `None` when the step needed no solve).
+    pub factorisation: Option<crate::solver::FactorKind>,
+    /// Negative eigenvalues of the last tangent, counted from the pivots of
+    /// its `L D L^T` factor (0 when Cholesky succeeded; `None` after LU). A
+    /// negative pivot on an equilibrium path is a loss of stability (limit
+    /// point, bifurcation) or a spurious mode.
+    pub negative_pivots: Option<usize>,
+    /// Each failed attempt that was cut back, in order.
+    pub cutbacks: Vec<Cutback>,
+    /// Increments that made up the step (1 without cutbacks).
+    pub substeps: usize,
+}
+
+/// A load increment that failed and was halved: the step went on from the
+/// last converged state `from` with half the increment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cutback {
+    /// Load factor of the last converged state.
+    pub from: f64,
+    /// The load factor the failed increment aimed at.
+    pub to: f64,
+    /// Why it failed ([`StepFailure`]'s message).
+    pub reason: String,
 }
 
 /// Why a step did not complete. The state stays at the last good step.

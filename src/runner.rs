@@ -103,6 +103,7 @@ pub fn run(
         let stop = stop.clone();
         sim.set_progress(Some(Box::new(move |_| !stop.load(Ordering::SeqCst))));
     }
+    sim.set_cancel(Some(stop.clone()));
     let end = loop {
         if sim.finished() {
             break RunEnd::Finished;
@@ -125,6 +126,7 @@ pub fn run(
         }
     };
     sim.set_progress(None);
+    sim.set_cancel(None);
     end
 }
 

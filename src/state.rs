@@ -65,10 +65,15 @@ pub struct Simulation {
     /// The observer's progress hook (behind a mutex so steps can call it
     /// through `&self`).
     progress: Option<std::sync::Mutex<ProgressHook>>,
+    /// The observer's stop flag, polled by long phases without residuals
+    /// (condition numbers).
+    cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Simulation {
-    pub fn new(model: Model) -> Simulation {
+    /// The simulation of `model` at its start; the model's points move
+    /// into the state (one copy of the points, not two).
+    pub fn new(mut model: Model) -> Simulation {
         let params = Params {
             tolerance: model.analysis.tolerance,
             condition: model.analysis.condition,
@@ -78,9 +83,12 @@ impl Simulation {
             delta_over_h: model.analysis.delta_over_h,
             gamma_m: model.gamma_m(),
         };
-        let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
+        let mut points = std::mem::take(&mut model.points);
+        points.shrink_to_fit();
+        let map = Mapping::build(&model.grid, &points, &model.bodies, &model.dirichlet, 0.0);
+        let initial_energy = points.kinetic_energy();
         let state = State {
-            points: model.points.clone(),
+            points,
             step: 0,
             external_work: 0.0,
             strain_energy: 0.0,
@@ -88,7 +96,7 @@ impl Simulation {
             ghost_faces: Vec::new(),
             iterations: 0,
             ibm_offsets: vec![[0.0; 2]; model.ibm.len()],
-            initial_energy: model.points.kinetic_energy(),
+            initial_energy,
         };
         Simulation {
             model,
@@ -96,6 +104,7 @@ impl Simulation {
             state,
             mass_cache: Default::default(),
             progress: None,
+            cancel: None,
         }
     }
 
@@ -276,6 +285,19 @@ impl Simulation {
     /// cancel the step by returning `false` ([`StepFailure::Cancelled`]).
     pub fn set_progress(&mut self, hook: Option<ProgressHook>) {
         self.progress = hook.map(std::sync::Mutex::new);
+    }
+
+    /// A flag that, once set, cancels the running step in any phase
+    /// ([`StepFailure::Cancelled`]), also where no residual is computed.
+    pub fn set_cancel(&mut self, flag: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>) {
+        self.cancel = flag;
+    }
+
+    /// Whether the observer's stop flag is set.
+    pub(crate) fn cancelled(&self) -> bool {
+        self.cancel
+            .as_ref()
+            .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst))
     }
 
     /// Tell the hook; `false` when the observer cancels the step.

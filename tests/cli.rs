@@ -175,8 +175,9 @@ fn replay_opens_the_viewer_or_says_how_to_install_it() {
 
 #[test]
 fn a_failed_run_leaves_a_readable_recording() {
-    // The plain GIMP beam (h = 0.25, 2x2 points) fails at step 12 (G Table
-    // 5): exit code 1, and the file holds the 11 steps and the failure.
+    // The plain GIMP beam (h = 0.25, 2x2 points) fails at step 13 (G Table
+    // 5: 12, see `docs/verification.md`): exit code 1, and the file holds
+    // the 12 steps and the failure.
     let scene = temp_path("beam0", "toml");
     let text = std::fs::read_to_string(common::scene_path("elastic-beam-ghost"))
         .unwrap()
@@ -192,7 +193,7 @@ fn a_failed_run_leaves_a_readable_recording() {
         rrd.to_str().unwrap(),
     ]);
     assert_eq!(code, 1, "{err}");
-    assert!(err.contains("step 12 failed"), "{err}");
+    assert!(err.contains("step 13 failed"), "{err}");
     let chunks = common::read_chunks(&rrd);
     let steps: std::collections::BTreeSet<i64> = chunks
         .iter()
@@ -204,9 +205,9 @@ fn a_failed_run_leaves_a_readable_recording() {
                 .unwrap_or_default()
         })
         .collect();
-    assert_eq!(steps, (0..=11).collect());
+    assert_eq!(steps, (0..=12).collect());
     let events = common::events(&rrd);
-    assert!(events.iter().any(|e| e.contains("step 12 failed")), "{events:?}");
+    assert!(events.iter().any(|e| e.contains("step 13 failed")), "{events:?}");
     let _ = std::fs::remove_file(&rrd);
     let _ = std::fs::remove_file(&scene);
 }

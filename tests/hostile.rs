@@ -629,6 +629,13 @@ fn cases() -> Vec<Case> {
             "analysis.max_iterations",
         ),
         (
+            "max-cutbacks-huge",
+            "load_steps = 1",
+            "load_steps = 1\nmax_cutbacks = 64",
+            "at most 20",
+            "analysis.max_cutbacks",
+        ),
+        (
             "gamma-k-negative",
             "load_steps = 1",
             "load_steps = 1\ngamma_k = -1.0",

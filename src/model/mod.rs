@@ -74,6 +74,8 @@ pub struct Model {
     pub grid: Grid,
     pub materials: Vec<Material>,
     pub bodies: Vec<Body>,
+    /// The initial points; [`crate::Simulation::new`] moves them into its
+    /// state (the model it keeps then holds none).
     pub points: Points,
     pub dirichlet: Vec<GridDirichlet>,
     /// Gravitational acceleration (m/s^2); body force = density * gravity.
@@ -160,6 +162,12 @@ impl Model {
         }
         if !(1..=1000).contains(&a.max_iterations) {
             return Err(FieldError::new("analysis.max_iterations", "must be between 1 and 1000"));
+        }
+        if a.max_cutbacks > 20 {
+            return Err(FieldError::new(
+                "analysis.max_cutbacks",
+                "must be at most 20 (an increment of 2^-20 of a load step)",
+            ));
         }
         if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
             return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));

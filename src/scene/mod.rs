@@ -440,6 +440,11 @@ pub struct AnalysisSpec {
     /// Newton iterations per load step at most (finite deformation).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: usize,
+    /// Finite deformation: how many times in a row a failing load
+    /// increment may be halved and retried from the last converged state
+    /// (0: the papers' fixed increments, a failure ends the run).
+    #[serde(default = "default_max_cutbacks")]
+    pub max_cutbacks: usize,
     /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.
     #[serde(default)]
     pub gamma_k: f64,
@@ -504,6 +509,10 @@ fn default_tolerance() -> f64 {
 
 fn default_delta_over_h() -> f64 {
     1e-6
+}
+
+fn default_max_cutbacks() -> usize {
+    4
 }
 
 fn default_max_iterations() -> usize {

@@ -92,6 +92,7 @@ fn engine(
             !cancel.load(Ordering::SeqCst)
         })));
     }
+    sim.set_cancel(Some(cancel.clone()));
     let mut field = Field::SigmaYy;
     // The state before the last step and that step's outcome, for redo.
     let mut before: Option<(crate::simulation::Snapshot, Option<app::Outcome>)> = None;
