@@ -284,7 +284,10 @@ fn throughput() {
     let (n_s, t_s) = time_mpmlab("stabilised", steps);
     let stabilised = rate((n_s, t_s));
     println!("explicit block, {n_l} points, {steps} steps of 1e-4 s (single thread):");
-    println!("  {:<28} {:>14} {:>10} {:>12}", "run", "point-steps/s", "s/step", "vs minimal");
+    println!(
+        "  {:<28} {:>14} {:>10} {:>12}",
+        "run", "point-steps/s", "s/step", "vs minimal"
+    );
     for (name, r, t) in [
         ("minimal kernel (lumped)", reference, t_ref),
         ("mpmlab lumped", lumped, t_l),
