@@ -74,20 +74,39 @@ impl MassSolver {
     }
 }
 
-/// Row-major `2m x 2m` mass block of a point group: `sum_p m_p S_a S_b I_2`.
-fn group_mass(map: &Mapping, b: usize, masses: &[f64], out: &mut Vec<f64>) {
+/// Row-major `2m x 2m` mass block of a point group: `sum_p m_p S_a S_b I_2`,
+/// with each point's weights from its basis (`basis` per body).
+fn group_mass(map: &Mapping, b: usize, points: &PointsOnGrid, out: &mut Vec<f64>) {
     let g = &map.groups[b];
     let m2 = 2 * g.nodes.len();
+    let pts = points.pts;
     out.clear();
     out.resize(m2 * m2, 0.0);
     for &p in &g.points {
-        let s = &map.stencils[p];
-        for a in 0..s.len {
-            for c in 0..s.len {
-                let v = masses[p] * s.w[a] * s.w[c];
+        let (len, w) = transfer::stencil_weights(points.grid, points.basis[pts.body[p]], pts.x[p], pts.lp[p]);
+        for a in 0..len {
+            for c in 0..len {
+                let v = pts.mass[p] * w[a] * w[c];
                 out[2 * a * m2 + 2 * c] += v;
                 out[(2 * a + 1) * m2 + 2 * c + 1] += v;
             }
+        }
+    }
+}
+
+/// The points, the grid and each body's basis: what the mass blocks read.
+struct PointsOnGrid<'a> {
+    grid: &'a crate::grid::Grid,
+    pts: &'a crate::points::Points,
+    basis: Vec<crate::basis::BasisKind>,
+}
+
+impl<'a> PointsOnGrid<'a> {
+    fn of(sim: &'a Simulation) -> PointsOnGrid<'a> {
+        PointsOnGrid {
+            grid: &sim.model.grid,
+            pts: &sim.state.points,
+            basis: sim.model.bodies.iter().map(|b| b.basis).collect(),
         }
     }
 }
@@ -98,14 +117,14 @@ fn consistent_mass(
     pattern: &Pattern,
     blocks: &[&[usize]],
     faces: &[GhostFace],
-    masses: &[f64],
+    points: &PointsOnGrid,
     gamma_m: f64,
 ) -> SparseColMat<usize, f64> {
     let ng = map.groups.len();
     pattern
         .assemble_with(&map.dofs, blocks, |b, out| {
             if b < ng {
-                group_mass(map, b, masses, out)
+                group_mass(map, b, points, out)
             } else {
                 faces[b - ng].stiffness(gamma_m, out)
             }
@@ -189,12 +208,15 @@ fn factorise_mass(
         return Ok((MassSolver::Lumped(d), false));
     }
     let blocks = blocks_of(map, faces);
-    let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
-    let reused = sim.mass_cache.pattern.is_some() && sim.mass_cache.key == key;
+    let cache = &sim.mass_cache;
+    let reused = cache.pattern.is_some()
+        && cache.key.len() == blocks.len()
+        && cache.key.iter().zip(&blocks).all(|(k, b)| k.as_slice() == *b);
     if !reused {
+        let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
         // The symbolic analysis needs values only for the structure.
-        let m = consistent_mass(map, &pattern, &blocks, faces, masses, 1.0);
+        let m = consistent_mass(map, &pattern, &blocks, faces, &PointsOnGrid::of(sim), 1.0);
         let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| StepFailure::Singular {
             step,
             reason: format!("mass matrix: {e}"),
@@ -210,7 +232,7 @@ fn factorise_mass(
     } else {
         0.0
     };
-    let m = consistent_mass(map, pattern, &blocks, faces, &sim.state.points.mass, gamma);
+    let m = consistent_mass(map, pattern, &blocks, faces, &PointsOnGrid::of(sim), gamma);
     let factor = linalg::cholesky_with(symbolic, &m).map_err(|e| StepFailure::Singular {
         step,
         reason: format!(
@@ -273,7 +295,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     let grid = &sim.model.grid;
     let Workspace {
         transfer: tr,
-        map: lumped_map,
+        map,
         free,
         lumped,
     } = ws;
@@ -282,35 +304,37 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     // 1. Map points: the lumped mass needs only the dofs and the active
     // cells (found by the point-to-grid pass); the consistent ones their
     // groups and, stabilised, the ghost faces (G 4.2).
-    let full = (kind != MassKind::Lumped)
-        .then(|| Mapping::build(grid, &sim.state.points, &sim.model.bodies, &sim.model.dirichlet, 0.0));
-    let faces = match &full {
-        Some(map) if stabilised => ghost::faces_of(grid, map, sim.model.analysis.ghost_cells),
-        _ => Vec::new(),
+    let pts = &sim.state.points;
+    let consistent = kind != MassKind::Lumped;
+    if consistent {
+        tr.map_groups(grid, pts, &bodies, map);
+    }
+    let faces = if stabilised {
+        ghost::faces_of(grid, map, sim.model.analysis.ghost_cells)
+    } else {
+        Vec::new()
     };
 
     // 2. Mass: nodal lumped mass and momentum in one pass.
     let t = Instant::now();
-    let pts = &sim.state.points;
-    tr.p2g(grid, pts, &bodies, &pts.v, full.is_none().then_some(&mut *lumped_map));
-    let (mass, pattern_reused) = match &full {
-        None => {
-            let mut d = std::mem::take(lumped);
-            d.clear();
-            d.resize(lumped_map.dofs.n_free, 0.0);
-            for (n, dof) in lumped_map.dofs.node_dof.iter().enumerate() {
-                for c in 0..2 {
-                    if let Dof::Free(i) = dof[c] {
-                        d[i] = tr.mass[n];
-                    }
+    tr.p2g(grid, pts, &bodies, &pts.v, (!consistent).then_some(&mut *map));
+    let (mass, pattern_reused) = if consistent {
+        factorise_mass(sim, map, &faces, kind, step)?
+    } else {
+        let mut d = std::mem::take(lumped);
+        d.clear();
+        d.resize(map.dofs.n_free, 0.0);
+        for (n, dof) in map.dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = dof[c] {
+                    d[i] = tr.mass[n];
                 }
             }
-            (MassSolver::Lumped(d), false)
         }
-        Some(map) => factorise_mass(sim, map, &faces, kind, step)?,
+        (MassSolver::Lumped(d), false)
     };
     timings.factorisation = t.elapsed().as_secs_f64();
-    let map: &Mapping = full.as_ref().unwrap_or(lumped_map);
+    let map: &Mapping = map;
     let pts = &sim.state.points;
     let grid = &sim.model.grid;
 
@@ -461,15 +485,9 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     let t = Instant::now();
     let conditioning = (sim.params.condition != ConditionMode::Off && every > 0 && (step % every == 0 || step == 1))
         .then(|| {
-            let built;
-            let map = match &full {
-                Some(map) => map,
-                None => {
-                    let model = &sim.model;
-                    built = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0);
-                    &built
-                }
-            };
+            // The conditioning's stiffness reads the stencils.
+            let model = &sim.model;
+            let map = &Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0);
             let faces = if faces.is_empty() {
                 ghost::faces_of(grid, map, sim.model.analysis.ghost_cells)
             } else {
@@ -492,10 +510,8 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     let kinetic_grid = mass.energy(v1);
     // Commit: the updated fields swap into the state; the cells of the
     // step before go back to the workspace to be refilled.
-    match full {
-        Some(map) => sim.state.active_cells = map.active_cells,
-        None => std::mem::swap(&mut sim.state.active_cells, &mut lumped_map.active_cells),
-    }
+    let map = &mut ws.map;
+    std::mem::swap(&mut sim.state.active_cells, &mut map.active_cells);
     tr.swap_points(&mut sim.state.points);
     sim.state.step = step;
     sim.state.external_work += work;
@@ -693,8 +709,9 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
     let masses = &sim.state.points.mass;
     let blocks = blocks_of(map, faces);
     let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-    let mc = consistent_mass(map, &pattern, &blocks, faces, masses, 0.0);
-    let ms = consistent_mass(map, &pattern, &blocks, faces, masses, sim.params.gamma_m);
+    let points = PointsOnGrid::of(sim);
+    let mc = consistent_mass(map, &pattern, &blocks, faces, &points, 0.0);
+    let ms = consistent_mass(map, &pattern, &blocks, faces, &points, sim.params.gamma_m);
     let (cond_c, fact_c) = spd_condition(&mc, mode, limit);
     let (cond_s, fact_s) = spd_condition(&ms, mode, limit);
     let lumped = lumped_mass(map, masses);
@@ -781,7 +798,14 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
     } else {
         let blocks = blocks_of(&map, &faces);
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-        let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, sim.params.gamma_m);
+        let m = consistent_mass(
+            &map,
+            &pattern,
+            &blocks,
+            &faces,
+            &PointsOnGrid::of(sim),
+            sim.params.gamma_m,
+        );
         MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
     };
     let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));

@@ -79,9 +79,17 @@ pub(crate) struct Transfer {
     /// Per grid node, the prescribed components (value 0 in explicit
     /// steps), computed once.
     prescribed: Vec<[Option<f64>; 2]>,
+    /// Per point, the node rectangle `(i0, j0, ni, nj)` its basis touches
+    /// ([`crate::basis::Stencil::key`]; [`NO_GROUP`] for points without
+    /// volume), this step and the step the groups were built for.
+    keys: Vec<(u32, u32, u8, u8)>,
+    grouped: Vec<(u32, u32, u8, u8)>,
     /// The points after the step (only the fields a step changes).
     pub(crate) next: Points,
 }
+
+/// The key of a point in no group (no volume).
+const NO_GROUP: (u32, u32, u8, u8) = (u32::MAX, u32::MAX, 0, 0);
 
 /// Per body: its basis and finite-strain material.
 pub(crate) struct Bodies {
@@ -102,6 +110,20 @@ fn for_each_node(grid: &Grid, w: &[Weights1d; 2], mut f: impl FnMut(usize, f64, 
             f(row + a, wx.w[a] * wy.w[b], [wx.dw[a] * wy.w[b], wx.w[a] * wy.dw[b]]);
         }
     }
+}
+
+/// A point's stencil weights `S_vp` in the order of
+/// [`crate::basis::stencil`] (row by row) and how many there are.
+#[inline]
+pub(crate) fn stencil_weights(grid: &Grid, kind: BasisKind, x: P2, lp: P2) -> (usize, [f64; crate::basis::MAX_NODES]) {
+    let w = weights_1d(grid, kind, x, lp);
+    let mut out = [0.0; crate::basis::MAX_NODES];
+    let mut k = 0;
+    for_each_node(grid, &w, |_, w, _| {
+        out[k] = w;
+        k += 1;
+    });
+    (k, out)
 }
 
 fn reset<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
@@ -226,6 +248,76 @@ impl Transfer {
             map.active_cells
                 .extend((0..self.cells.len()).filter(|&c| self.cells[c]));
         }
+    }
+
+    /// Fill `map` as [`Mapping::build`] does, except its stencils (left
+    /// empty: the passes evaluate the basis themselves): the groups of
+    /// points with volume by node rectangle (rebuilt only when a point
+    /// changed rectangle since they were built), the active nodes, their
+    /// dofs, the reached, populated and filled cells. What the consistent
+    /// and stabilised masses and the ghost faces read.
+    pub(crate) fn map_groups(&mut self, grid: &Grid, pts: &Points, bodies: &Bodies, map: &mut Mapping) {
+        self.keys.clear();
+        self.keys.extend((0..pts.len()).map(|p| {
+            if pts.vol[p] > 0.0 {
+                let [wx, wy] = weights_1d(grid, bodies.basis[pts.body[p]], pts.x[p], pts.lp[p]);
+                (wx.first as u32, wy.first as u32, wx.len as u8, wy.len as u8)
+            } else {
+                NO_GROUP
+            }
+        }));
+        if self.keys != self.grouped || map.groups.is_empty() {
+            let mut order: Vec<usize> = (0..pts.len()).filter(|&p| self.keys[p] != NO_GROUP).collect();
+            order.sort_unstable_by_key(|&p| (self.keys[p], p));
+            map.groups.clear();
+            for run in order.chunk_by(|&p, &q| self.keys[p] == self.keys[q]) {
+                let (i0, j0, ni, nj) = self.keys[run[0]];
+                let nodes = (0..nj as usize)
+                    .flat_map(|b| (0..ni as usize).map(move |a| grid.node(i0 as usize + a, j0 as usize + b)))
+                    .collect();
+                map.groups.push(crate::assembly::Group {
+                    nodes,
+                    points: run.to_vec(),
+                });
+            }
+            std::mem::swap(&mut self.keys, &mut self.grouped);
+        }
+        reset(&mut self.active, grid.num_nodes(), false);
+        for g in &map.groups {
+            for &n in &g.nodes {
+                self.active[n] = true;
+            }
+        }
+        reset(&mut self.cells, grid.num_cells(), false);
+        reset(&mut map.cell_fill, grid.num_cells(), 0.0);
+        let (cells, fill) = (&mut self.cells, &mut map.cell_fill);
+        for p in 0..pts.len() {
+            if pts.vol[p] == 0.0 {
+                continue;
+            }
+            reached_cells(
+                grid,
+                bodies.basis[pts.body[p]],
+                pts.x[p],
+                pts.lp[p],
+                pts.vol[p],
+                |c, f| {
+                    cells[c] = true;
+                    fill[c] += f;
+                },
+            );
+        }
+        map.active_cells.clear();
+        map.active_cells.extend((0..cells.len()).filter(|&c| cells[c]));
+        cells.iter_mut().for_each(|c| *c = false);
+        for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+            if let Some((i, j)) = grid.cell_of(pts.x[p]) {
+                cells[j * grid.nx + i] = true;
+            }
+        }
+        map.populated_cells.clear();
+        map.populated_cells.extend((0..cells.len()).filter(|&c| cells[c]));
+        map.dofs.number(&self.active, &self.prescribed);
     }
 
     /// Point to grid: nodal momentum only (MUSL's second mapping).
