@@ -97,7 +97,8 @@ pub(crate) struct Weights1d {
 #[inline]
 fn standard_1d(s: f64, n_cells: usize, h: f64) -> Weights1d {
     // s = (x - x0)/h, the point's coordinate in cell units.
-    let c = (s.floor().max(0.0) as usize).min(n_cells - 1);
+    // `s as usize` is `floor(max(s, 0))` (NaN to 0) without a libm call.
+    let c = (s as usize).min(n_cells - 1);
     let xi = s - c as f64;
     Weights1d {
         first: c,

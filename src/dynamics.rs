@@ -397,7 +397,10 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     transfer::scatter_into(&map.dofs, v1, None, &mut tr.nodal_b);
     // Nodes that points barely touch may take large velocities without
     // moving anything; the points' own increments are what must stay small.
-    let max_speed = tr.nodal_b.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f64::max);
+    let max_speed = (tr.nodal_b.iter().zip(&map.dofs.node_dof))
+        .filter(|(_, d)| d[0] != Dof::Inactive)
+        .map(|(v, _)| v[0].hypot(v[1]))
+        .fold(0.0, f64::max);
 
     // 6-7. Points: velocities, positions, then (USL) stresses.
     let t = Instant::now();
