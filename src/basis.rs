@@ -94,7 +94,7 @@ pub(crate) struct Weights1d {
     pub(crate) dw: [f64; 4],
 }
 
-#[inline]
+#[inline(always)]
 fn standard_1d(s: f64, n_cells: usize, h: f64) -> Weights1d {
     // s = (x - x0)/h, the point's coordinate in cell units.
     // `s as usize` is `floor(max(s, 0))` (NaN to 0) without a libm call.
@@ -164,11 +164,10 @@ fn gimp_1d_nodes(x: f64, x0: f64, l: f64, h: f64, n_cells: usize) -> Weights1d {
 pub(crate) fn weights_1d(grid: &Grid, kind: BasisKind, x: [f64; 2], lp: [f64; 2]) -> [Weights1d; 2] {
     let h = grid.h;
     let n = [grid.nx, grid.ny];
-    let one_d = |d: usize| match kind {
-        BasisKind::Standard => standard_1d((x[d] - grid.origin[d]) / h, n[d], h),
-        BasisKind::Gimp => gimp_1d_nodes(x[d], grid.origin[d], lp[d].clamp(1e-12 * h, h), h, n[d]),
-    };
-    [one_d(0), one_d(1)]
+    match kind {
+        BasisKind::Standard => [0, 1].map(|d| standard_1d((x[d] - grid.origin[d]) / h, n[d], h)),
+        BasisKind::Gimp => [0, 1].map(|d| gimp_1d_nodes(x[d], grid.origin[d], lp[d].clamp(1e-12 * h, h), h, n[d])),
+    }
 }
 
 /// The stencil of a point at `x` with GIMP half-lengths `lp` (ignored by the

@@ -193,8 +193,9 @@ fn non_finite(step: usize, what: &str) -> StepFailure {
     }
 }
 
-/// Factorise the mass of this step (reusing the cached pattern when the
-/// blocks are unchanged). Returns the solver and whether the cache was hit.
+/// Factorise the consistent or stabilised mass of this step (reusing the
+/// cached pattern when the blocks are unchanged). Returns the solver and
+/// whether the cache was hit.
 fn factorise_mass(
     sim: &mut Simulation,
     map: &Mapping,
@@ -202,11 +203,6 @@ fn factorise_mass(
     kind: MassKind,
     step: usize,
 ) -> Result<(MassSolver, bool), StepFailure> {
-    let masses = &sim.state.points.mass;
-    if kind == MassKind::Lumped {
-        let d = lumped_mass(map, masses);
-        return Ok((MassSolver::Lumped(d), false));
-    }
     let blocks = blocks_of(map, faces);
     let cache = &sim.mass_cache;
     let reused = cache.pattern.is_some()
