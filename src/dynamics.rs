@@ -83,7 +83,11 @@ fn group_mass(map: &Mapping, b: usize, points: &PointsOnGrid, out: &mut Vec<f64>
     out.clear();
     out.resize(m2 * m2, 0.0);
     for &p in &g.points {
-        let (len, w) = transfer::stencil_weights(points.grid, points.basis[pts.body[p]], pts.x[p], pts.lp[p]);
+        let w1 = match points.cached.get(p) {
+            Some(w) => *w,
+            None => crate::basis::weights_1d(points.grid, points.basis[pts.body[p]], pts.x[p], pts.lp[p]),
+        };
+        let (len, w) = transfer::stencil_weights(points.grid, &w1);
         for a in 0..len {
             for c in 0..len {
                 let v = pts.mass[p] * w[a] * w[c];
@@ -94,11 +98,13 @@ fn group_mass(map: &Mapping, b: usize, points: &PointsOnGrid, out: &mut Vec<f64>
     }
 }
 
-/// The points, the grid and each body's basis: what the mass blocks read.
+/// The points, the grid and each body's basis: what the mass blocks read;
+/// with the points' 1D basis factors when the step has cached them.
 struct PointsOnGrid<'a> {
     grid: &'a crate::grid::Grid,
     pts: &'a crate::points::Points,
     basis: Vec<crate::basis::BasisKind>,
+    cached: &'a [[crate::basis::Weights1d; 2]],
 }
 
 impl<'a> PointsOnGrid<'a> {
@@ -107,6 +113,7 @@ impl<'a> PointsOnGrid<'a> {
             grid: &sim.model.grid,
             pts: &sim.state.points,
             basis: sim.model.bodies.iter().map(|b| b.basis).collect(),
+            cached: &[],
         }
     }
 }
@@ -202,6 +209,7 @@ fn factorise_mass(
     faces: &[GhostFace],
     kind: MassKind,
     step: usize,
+    cached: &[[crate::basis::Weights1d; 2]],
 ) -> Result<(MassSolver, bool), StepFailure> {
     let blocks = blocks_of(map, faces);
     let cache = &sim.mass_cache;
@@ -212,7 +220,11 @@ fn factorise_mass(
         let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
         // The symbolic analysis needs values only for the structure.
-        let m = consistent_mass(map, &pattern, &blocks, faces, &PointsOnGrid::of(sim), 1.0);
+        let points = PointsOnGrid {
+            cached,
+            ..PointsOnGrid::of(sim)
+        };
+        let m = consistent_mass(map, &pattern, &blocks, faces, &points, 1.0);
         let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| StepFailure::Singular {
             step,
             reason: format!("mass matrix: {e}"),
@@ -228,7 +240,11 @@ fn factorise_mass(
     } else {
         0.0
     };
-    let m = consistent_mass(map, pattern, &blocks, faces, &PointsOnGrid::of(sim), gamma);
+    let points = PointsOnGrid {
+        cached,
+        ..PointsOnGrid::of(sim)
+    };
+    let m = consistent_mass(map, pattern, &blocks, faces, &points, gamma);
     let factor = linalg::cholesky_with(symbolic, &m).map_err(|e| StepFailure::Singular {
         step,
         reason: format!(
@@ -279,22 +295,26 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     } else {
         a.mass
     };
-    let bodies = Bodies {
-        basis: sim.model.bodies.iter().map(|b| b.basis).collect(),
-        material: sim
-            .model
-            .bodies
-            .iter()
-            .map(|b| sim.model.materials[b.material].hencky())
-            .collect(),
-    };
     let grid = &sim.model.grid;
     let Workspace {
         transfer: tr,
         map,
         free,
         lumped,
+        weights,
     } = ws;
+    let basis: Vec<_> = sim.model.bodies.iter().map(|b| b.basis).collect();
+    transfer::cache_weights(grid, &sim.state.points, &basis, weights);
+    let bodies = Bodies {
+        basis,
+        material: sim
+            .model
+            .bodies
+            .iter()
+            .map(|b| sim.model.materials[b.material].hencky())
+            .collect(),
+        cached: weights,
+    };
     tr.prepare(grid, &sim.model.dirichlet, sim.state.points.len());
 
     // 1. Map points: the lumped mass needs only the dofs and the active
@@ -315,7 +335,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
     let t = Instant::now();
     tr.p2g(grid, pts, &bodies, &pts.v, (!consistent).then_some(&mut *map));
     let (mass, pattern_reused) = if consistent {
-        factorise_mass(sim, map, &faces, kind, step)?
+        factorise_mass(sim, map, &faces, kind, step, bodies.cached)?
     } else {
         let mut d = std::mem::take(lumped);
         d.clear();

@@ -37,6 +37,9 @@ pub(crate) struct Workspace {
     pub(crate) free: [Vec<f64>; 7],
     /// The lumped mass on the free dofs (kg).
     pub(crate) lumped: Vec<f64>,
+    /// Per point, its 1D basis factors this step (GIMP scenes; see
+    /// [`cache_weights`]).
+    pub(crate) weights: Vec<[Weights1d; 2]>,
 }
 
 impl Default for Workspace {
@@ -53,6 +56,7 @@ impl Default for Workspace {
             },
             free: Default::default(),
             lumped: Vec::new(),
+            weights: Vec::new(),
         }
     }
 }
@@ -91,10 +95,36 @@ pub(crate) struct Transfer {
 /// The key of a point in no group (no volume).
 const NO_GROUP: (u32, u32, u8, u8) = (u32::MAX, u32::MAX, 0, 0);
 
-/// Per body: its basis and finite-strain material.
-pub(crate) struct Bodies {
+/// Per body: its basis and finite-strain material; and the points' 1D
+/// basis factors of this step when they are cached.
+pub(crate) struct Bodies<'a> {
     pub(crate) basis: Vec<BasisKind>,
     pub(crate) material: Vec<Hencky>,
+    /// Per point, empty or its 1D factors at the start of the step (see
+    /// [`cache_weights`]).
+    pub(crate) cached: &'a [[Weights1d; 2]],
+}
+
+impl Bodies<'_> {
+    /// Point `p`'s 1D basis factors at its position: cached, or evaluated.
+    #[inline(always)]
+    pub(crate) fn weights(&self, grid: &Grid, pts: &Points, p: usize) -> [Weights1d; 2] {
+        match self.cached.get(p) {
+            Some(w) => *w,
+            None => weights_1d(grid, self.basis[pts.body[p]], pts.x[p], pts.lp[p]),
+        }
+    }
+}
+
+/// With a GIMP body, the 1D basis factors of every point into `out` (as
+/// the passes read them five times a step and GIMP's are dear to
+/// evaluate); without, `out` is left empty: the standard basis is cheaper
+/// to evaluate in the loops than to read back.
+pub(crate) fn cache_weights(grid: &Grid, pts: &Points, basis: &[BasisKind], out: &mut Vec<[Weights1d; 2]>) {
+    out.clear();
+    if basis.contains(&BasisKind::Gimp) {
+        out.extend((0..pts.len()).map(|p| weights_1d(grid, basis[pts.body[p]], pts.x[p], pts.lp[p])));
+    }
 }
 
 /// Call `f(node, S_vp, grad S_vp)` for the nodes of a point's stencil in
@@ -115,11 +145,10 @@ fn for_each_node(grid: &Grid, w: &[Weights1d; 2], mut f: impl FnMut(usize, f64, 
 /// A point's stencil weights `S_vp` in the order of
 /// [`crate::basis::stencil`] (row by row) and how many there are.
 #[inline]
-pub(crate) fn stencil_weights(grid: &Grid, kind: BasisKind, x: P2, lp: P2) -> (usize, [f64; crate::basis::MAX_NODES]) {
-    let w = weights_1d(grid, kind, x, lp);
+pub(crate) fn stencil_weights(grid: &Grid, w: &[Weights1d; 2]) -> (usize, [f64; crate::basis::MAX_NODES]) {
     let mut out = [0.0; crate::basis::MAX_NODES];
     let mut k = 0;
-    for_each_node(grid, &w, |_, w, _| {
+    for_each_node(grid, w, |_, w, _| {
         out[k] = w;
         k += 1;
     });
@@ -226,7 +255,7 @@ impl Transfer {
         let (mass, momentum, active) = (&mut self.mass, &mut self.momentum, &mut self.active);
         for p in 0..pts.len() {
             let kind = bodies.basis[pts.body[p]];
-            let w = weights_1d(grid, kind, pts.x[p], pts.lp[p]);
+            let w = bodies.weights(grid, pts, p);
             let (m, v) = (pts.mass[p], velocities[p]);
             let with_volume = activity && pts.vol[p] > 0.0;
             for_each_node(grid, &w, |n, w, _| {
@@ -260,7 +289,7 @@ impl Transfer {
         self.keys.clear();
         self.keys.extend((0..pts.len()).map(|p| {
             if pts.vol[p] > 0.0 {
-                let [wx, wy] = weights_1d(grid, bodies.basis[pts.body[p]], pts.x[p], pts.lp[p]);
+                let [wx, wy] = bodies.weights(grid, pts, p);
                 (wx.first as u32, wy.first as u32, wx.len as u8, wy.len as u8)
             } else {
                 NO_GROUP
@@ -325,7 +354,7 @@ impl Transfer {
         reset(&mut self.momentum, grid.num_nodes(), [0.0; 2]);
         let momentum = &mut self.momentum;
         for p in 0..pts.len() {
-            let w = weights_1d(grid, bodies.basis[pts.body[p]], pts.x[p], pts.lp[p]);
+            let w = bodies.weights(grid, pts, p);
             let (m, v) = (pts.mass[p], velocities[p]);
             for_each_node(grid, &w, |n, w, _| {
                 momentum[n][0] += w * m * v[0];
@@ -368,7 +397,7 @@ impl Transfer {
         let (du, fint, body_force, next) = (&self.nodal_a, &mut self.fint, &mut self.body_force, &mut self.next);
         for p in 0..pts.len() {
             let body = pts.body[p];
-            let w = weights_1d(grid, bodies.basis[body], pts.x[p], pts.lp[p]);
+            let w = bodies.weights(grid, pts, p);
             let mut g = [[0.0; 2]; 2];
             for_each_node(grid, &w, |n, _, dw| {
                 let v = du[n];
@@ -448,7 +477,7 @@ impl Transfer {
         };
         let (an, vn, next) = (&self.nodal_a, &self.nodal_b, &mut self.next);
         for p in 0..pts.len() {
-            let w = weights_1d(grid, bodies.basis[pts.body[p]], pts.x[p], pts.lp[p]);
+            let w = bodies.weights(grid, pts, p);
             let (mut a, mut v) = ([0.0; 2], [0.0; 2]);
             for_each_node(grid, &w, |n, w, _| {
                 if flip {
