@@ -435,10 +435,11 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
             let velocities = std::mem::take(&mut tr.next.v);
             tr.p2g_momentum(grid, pts, &bodies, &velocities);
             tr.next.v = velocities;
-            let (mut bm, mut vm) = (Vec::new(), Vec::new());
-            transfer::gather_into(&map.dofs, &tr.momentum, &mut bm);
-            mass.solve_into(&bm, &mut vm);
-            transfer::scatter_into(&map.dofs, &vm, Some(dt), &mut tr.nodal_a);
+            // The momentum and f_int vectors are free again.
+            let (bm, vm) = (&mut *b, &mut *fint);
+            transfer::gather_into(&map.dofs, &tr.momentum, bm);
+            mass.solve_into(bm, vm);
+            transfer::scatter_into(&map.dofs, vm, Some(dt), &mut tr.nodal_a);
             tr.stress_pass(grid, pts, &bodies, gravity, false, true)
         }
     };
