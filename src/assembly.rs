@@ -27,7 +27,7 @@ pub enum Dof {
 }
 
 /// Numbering of the active degrees of freedom of one step.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct DofMap {
     /// Per grid node, its x and y components.
     pub node_dof: Vec<[Dof; 2]>,
@@ -35,6 +35,97 @@ pub struct DofMap {
     /// Prescribed components: `(node, component, increment this step)` (m).
     pub constrained: Vec<(usize, usize, f64)>,
     pub active_nodes: usize,
+}
+
+impl DofMap {
+    /// Number the components of the `active` nodes (per grid node) in
+    /// node order, x before y: those with a prescribed value (per node and
+    /// component, m) become [`Dof::Fixed`], the others [`Dof::Free`]. The
+    /// vectors are refilled in place.
+    pub(crate) fn number(&mut self, active: &[bool], prescribed: &[[Option<f64>; 2]]) {
+        self.node_dof.clear();
+        self.node_dof.resize(active.len(), [Dof::Inactive; 2]);
+        self.constrained.clear();
+        (self.n_free, self.active_nodes) = (0, 0);
+        for n in 0..active.len() {
+            if !active[n] {
+                continue;
+            }
+            self.active_nodes += 1;
+            for c in 0..2 {
+                self.node_dof[n][c] = match prescribed[n][c] {
+                    Some(v) => {
+                        self.constrained.push((n, c, v));
+                        Dof::Fixed(self.constrained.len() - 1)
+                    }
+                    None => {
+                        self.n_free += 1;
+                        Dof::Free(self.n_free - 1)
+                    }
+                };
+            }
+        }
+    }
+}
+
+/// Per grid node, the prescribed increment of each component this step
+/// (`value * dlambda`, m), or `None`: later conditions override earlier ones.
+pub(crate) fn prescribed(grid: &Grid, dirichlet: &[GridDirichlet], dlambda: f64) -> Vec<[Option<f64>; 2]> {
+    let mut prescribed: Vec<[Option<f64>; 2]> = vec![[None, None]; grid.num_nodes()];
+    for d in dirichlet {
+        let nodes: Vec<usize> = match d.target {
+            GridTarget::Line { axis: 0, index } => (0..=grid.ny).map(|k| grid.node(index, k)).collect(),
+            GridTarget::Line { index, .. } => (0..=grid.nx).map(|k| grid.node(k, index)).collect(),
+            GridTarget::Node(n) => vec![n],
+        };
+        for n in nodes {
+            for c in 0..2 {
+                if let Some(v) = d.value[c] {
+                    prescribed[n][c] = Some(v * dlambda);
+                }
+            }
+        }
+    }
+    prescribed
+}
+
+/// The cells a point's basis reaches into, each with the fraction of its
+/// area the point fills: `f(cell, fill)`. Standard: the cell holding `x`
+/// (position, m) with `vol / h^2` (`vol` in m^3 per unit thickness); GIMP:
+/// every cell the domain of half-lengths `lp` (m) overlaps by more than
+/// round-off, with the overlap's area over `h^2`.
+#[inline]
+pub(crate) fn reached_cells(
+    grid: &Grid,
+    kind: BasisKind,
+    x: [f64; 2],
+    lp: [f64; 2],
+    vol: f64,
+    mut f: impl FnMut(usize, f64),
+) {
+    let h2 = grid.h * grid.h;
+    match kind {
+        BasisKind::Standard => {
+            if let Some((i, j)) = grid.cell_of(x) {
+                f(j * grid.nx + i, vol / h2);
+            }
+        }
+        BasisKind::Gimp => {
+            let range = |d: usize, n: usize| {
+                let s = |v: f64| (v - grid.origin[d]) / grid.h;
+                let lo = (s(x[d] - lp[d]) + 1e-12).floor().max(0.0) as usize;
+                let hi = ((s(x[d] + lp[d]) - 1e-12).ceil().max(1.0) as usize).min(n);
+                lo..hi.max(lo + 1).min(n)
+            };
+            for j in range(1, grid.ny) {
+                for i in range(0, grid.nx) {
+                    let c0 = grid.cell_min(i, j);
+                    let overlap = |d: usize| ((x[d] + lp[d]).min(c0[d] + grid.h) - (x[d] - lp[d]).max(c0[d])).max(0.0);
+                    f(j * grid.nx + i, overlap(0) * overlap(1) / h2);
+                }
+            }
+        }
+    }
 }
 
 /// Points that touch the same nodes, and those nodes.
@@ -104,37 +195,21 @@ impl Mapping {
         // round-off (the cells whose nodes it weights).
         let mut cells = vec![false; grid.num_cells()];
         let mut cell_fill = vec![0.0; grid.num_cells()];
-        let h2 = grid.h * grid.h;
         for p in 0..pts.len() {
             if pts.vol[p] == 0.0 {
                 continue;
             }
-            match bodies[pts.body[p]].basis {
-                BasisKind::Standard => {
-                    if let Some((i, j)) = grid.cell_of(pts.x[p]) {
-                        cells[j * grid.nx + i] = true;
-                        cell_fill[j * grid.nx + i] += pts.vol[p] / h2;
-                    }
-                }
-                BasisKind::Gimp => {
-                    let range = |d: usize, n: usize| {
-                        let s = |v: f64| (v - grid.origin[d]) / grid.h;
-                        let lo = (s(pts.x[p][d] - pts.lp[p][d]) + 1e-12).floor().max(0.0) as usize;
-                        let hi = ((s(pts.x[p][d] + pts.lp[p][d]) - 1e-12).ceil().max(1.0) as usize).min(n);
-                        lo..hi.max(lo + 1).min(n)
-                    };
-                    let (x, l) = (pts.x[p], pts.lp[p]);
-                    for j in range(1, grid.ny) {
-                        for i in range(0, grid.nx) {
-                            cells[j * grid.nx + i] = true;
-                            let c0 = grid.cell_min(i, j);
-                            let overlap =
-                                |d: usize| ((x[d] + l[d]).min(c0[d] + grid.h) - (x[d] - l[d]).max(c0[d])).max(0.0);
-                            cell_fill[j * grid.nx + i] += overlap(0) * overlap(1) / h2;
-                        }
-                    }
-                }
-            }
+            reached_cells(
+                grid,
+                bodies[pts.body[p]].basis,
+                pts.x[p],
+                pts.lp[p],
+                pts.vol[p],
+                |c, fill| {
+                    cells[c] = true;
+                    cell_fill[c] += fill;
+                },
+            );
         }
         let active_cells = (0..cells.len()).filter(|&c| cells[c]).collect();
         let mut populated = vec![false; grid.num_cells()];
@@ -145,52 +220,12 @@ impl Mapping {
         }
         let populated_cells = (0..populated.len()).filter(|&c| populated[c]).collect();
 
-        // Prescribed components: later conditions override earlier ones.
-        let mut prescribed: Vec<[Option<f64>; 2]> = vec![[None, None]; grid.num_nodes()];
-        for d in dirichlet {
-            let nodes: Vec<usize> = match d.target {
-                GridTarget::Line { axis: 0, index } => (0..=grid.ny).map(|k| grid.node(index, k)).collect(),
-                GridTarget::Line { index, .. } => (0..=grid.nx).map(|k| grid.node(k, index)).collect(),
-                GridTarget::Node(n) => vec![n],
-            };
-            for n in nodes {
-                for c in 0..2 {
-                    if let Some(v) = d.value[c] {
-                        prescribed[n][c] = Some(v * dlambda);
-                    }
-                }
-            }
-        }
-
-        let mut node_dof = vec![[Dof::Inactive; 2]; grid.num_nodes()];
-        let (mut n_free, mut constrained, mut active_nodes) = (0, Vec::new(), 0);
-        for n in 0..grid.num_nodes() {
-            if !active[n] {
-                continue;
-            }
-            active_nodes += 1;
-            for c in 0..2 {
-                node_dof[n][c] = match prescribed[n][c] {
-                    Some(v) => {
-                        constrained.push((n, c, v));
-                        Dof::Fixed(constrained.len() - 1)
-                    }
-                    None => {
-                        n_free += 1;
-                        Dof::Free(n_free - 1)
-                    }
-                };
-            }
-        }
+        let mut dofs = DofMap::default();
+        dofs.number(&active, &prescribed(grid, dirichlet, dlambda));
         Mapping {
             stencils,
             groups,
-            dofs: DofMap {
-                node_dof,
-                n_free,
-                constrained,
-                active_nodes,
-            },
+            dofs,
             active_cells,
             populated_cells,
             cell_fill,

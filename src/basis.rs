@@ -85,16 +85,20 @@ impl Stencil {
 }
 
 /// 1D weights of one direction: up to 4 nodes starting at index `first`.
-struct Weights1d {
-    first: usize,
-    len: usize,
-    w: [f64; 4],
-    dw: [f64; 4],
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Weights1d {
+    pub(crate) first: usize,
+    pub(crate) len: usize,
+    /// Weights (1) and their derivatives (1/length) of nodes `first ..`.
+    pub(crate) w: [f64; 4],
+    pub(crate) dw: [f64; 4],
 }
 
+#[inline(always)]
 fn standard_1d(s: f64, n_cells: usize, h: f64) -> Weights1d {
     // s = (x - x0)/h, the point's coordinate in cell units.
-    let c = (s.floor().max(0.0) as usize).min(n_cells - 1);
+    // `s as usize` is `floor(max(s, 0))` (NaN to 0) without a libm call.
+    let c = (s as usize).min(n_cells - 1);
     let xi = s - c as f64;
     Weights1d {
         first: c,
@@ -122,6 +126,7 @@ pub fn gimp_1d(d: f64, l: f64, h: f64) -> (f64, f64) {
     }
 }
 
+#[inline]
 fn gimp_1d_nodes(x: f64, x0: f64, l: f64, h: f64, n_cells: usize) -> Weights1d {
     let lo = ((x - l - h - x0) / h).ceil().max(0.0) as usize;
     let hi = (((x + l + h - x0) / h).floor().max(0.0) as usize).min(n_cells);
@@ -151,16 +156,24 @@ fn gimp_1d_nodes(x: f64, x0: f64, l: f64, h: f64, n_cells: usize) -> Weights1d {
     out
 }
 
+/// The 1D factors of a point's stencil along x and y: the stencil's node
+/// `(wx.first + a, wy.first + b)` has weight `wx.w[a] wy.w[b]` and
+/// gradient `[wx.dw[a] wy.w[b], wx.w[a] wy.dw[b]]` (what [`stencil`]
+/// lists row by row; tight loops use them without building a [`Stencil`]).
+#[inline]
+pub(crate) fn weights_1d(grid: &Grid, kind: BasisKind, x: [f64; 2], lp: [f64; 2]) -> [Weights1d; 2] {
+    let h = grid.h;
+    let n = [grid.nx, grid.ny];
+    match kind {
+        BasisKind::Standard => [0, 1].map(|d| standard_1d((x[d] - grid.origin[d]) / h, n[d], h)),
+        BasisKind::Gimp => [0, 1].map(|d| gimp_1d_nodes(x[d], grid.origin[d], lp[d].clamp(1e-12 * h, h), h, n[d])),
+    }
+}
+
 /// The stencil of a point at `x` with GIMP half-lengths `lp` (ignored by the
 /// standard basis). The point must lie inside the grid.
 pub fn stencil(grid: &Grid, kind: BasisKind, x: [f64; 2], lp: [f64; 2]) -> Stencil {
-    let h = grid.h;
-    let n = [grid.nx, grid.ny];
-    let one_d = |d: usize| match kind {
-        BasisKind::Standard => standard_1d((x[d] - grid.origin[d]) / h, n[d], h),
-        BasisKind::Gimp => gimp_1d_nodes(x[d], grid.origin[d], lp[d].clamp(1e-12 * h, h), h, n[d]),
-    };
-    let (wx, wy) = (one_d(0), one_d(1));
+    let [wx, wy] = weights_1d(grid, kind, x, lp);
     let mut st = Stencil {
         len: 0,
         nodes: [0; MAX_NODES],

@@ -28,15 +28,16 @@ use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::bulk::blocks_of;
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
-use crate::kinematics::{be_matrix, commit_point, increment_gradient};
 use crate::linalg::{self, Condition, ConditionMethod, Factor};
-use crate::material::hencky::Response;
 use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
 use crate::state::{MassCache, Simulation};
 use faer::sparse::SparseColMat;
-use nalgebra::Matrix2;
 use std::time::Instant;
+use transfer::{Bodies, Workspace};
+
+mod transfer;
+pub(crate) use transfer::Workspace as ExplicitWorkspace;
 
 pub use crate::report::{Conditioning, DynamicsReport};
 
@@ -48,6 +49,15 @@ enum MassSolver {
 }
 
 impl MassSolver {
+    /// `x = M^-1 b` into `x` (free dofs).
+    fn solve_into(&self, b: &[f64], x: &mut Vec<f64>) {
+        x.clear();
+        match self {
+            MassSolver::Lumped(d) => x.extend(b.iter().zip(d).map(|(b, d)| b / d)),
+            MassSolver::Consistent(f, _) => x.extend(linalg::solve(f, b)),
+        }
+    }
+
     fn solve(&self, b: &[f64]) -> Vec<f64> {
         match self {
             MassSolver::Lumped(d) => b.iter().zip(d).map(|(b, d)| b / d).collect(),
@@ -64,20 +74,46 @@ impl MassSolver {
     }
 }
 
-/// Row-major `2m x 2m` mass block of a point group: `sum_p m_p S_a S_b I_2`.
-fn group_mass(map: &Mapping, b: usize, masses: &[f64], out: &mut Vec<f64>) {
+/// Row-major `2m x 2m` mass block of a point group: `sum_p m_p S_a S_b I_2`,
+/// with each point's weights from its basis (`basis` per body).
+fn group_mass(map: &Mapping, b: usize, points: &PointsOnGrid, out: &mut Vec<f64>) {
     let g = &map.groups[b];
     let m2 = 2 * g.nodes.len();
+    let pts = points.pts;
     out.clear();
     out.resize(m2 * m2, 0.0);
     for &p in &g.points {
-        let s = &map.stencils[p];
-        for a in 0..s.len {
-            for c in 0..s.len {
-                let v = masses[p] * s.w[a] * s.w[c];
+        let w1 = match points.cached.get(p) {
+            Some(w) => *w,
+            None => crate::basis::weights_1d(points.grid, points.basis[pts.body[p]], pts.x[p], pts.lp[p]),
+        };
+        let (len, w) = transfer::stencil_weights(points.grid, &w1);
+        for a in 0..len {
+            for c in 0..len {
+                let v = pts.mass[p] * w[a] * w[c];
                 out[2 * a * m2 + 2 * c] += v;
                 out[(2 * a + 1) * m2 + 2 * c + 1] += v;
             }
+        }
+    }
+}
+
+/// The points, the grid and each body's basis: what the mass blocks read;
+/// with the points' 1D basis factors when the step has cached them.
+struct PointsOnGrid<'a> {
+    grid: &'a crate::grid::Grid,
+    pts: &'a crate::points::Points,
+    basis: Vec<crate::basis::BasisKind>,
+    cached: &'a [[crate::basis::Weights1d; 2]],
+}
+
+impl<'a> PointsOnGrid<'a> {
+    fn of(sim: &'a Simulation) -> PointsOnGrid<'a> {
+        PointsOnGrid {
+            grid: &sim.model.grid,
+            pts: &sim.state.points,
+            basis: sim.model.bodies.iter().map(|b| b.basis).collect(),
+            cached: &[],
         }
     }
 }
@@ -88,14 +124,14 @@ fn consistent_mass(
     pattern: &Pattern,
     blocks: &[&[usize]],
     faces: &[GhostFace],
-    masses: &[f64],
+    points: &PointsOnGrid,
     gamma_m: f64,
 ) -> SparseColMat<usize, f64> {
     let ng = map.groups.len();
     pattern
         .assemble_with(&map.dofs, blocks, |b, out| {
             if b < ng {
-                group_mass(map, b, masses, out)
+                group_mass(map, b, points, out)
             } else {
                 faces[b - ng].stiffness(gamma_m, out)
             }
@@ -156,35 +192,6 @@ fn map_velocities(map: &Mapping, mass: &MassSolver, masses: &[f64], velocities: 
     mass.solve(&gather(map, &momentum))
 }
 
-/// Material responses to the nodal increments `du` (m) and the internal
-/// force `sum_p V0_p P_p grad S` on the free dofs.
-/// Per point: `dF` and the material's response (none for zero-volume points).
-type Responses = Vec<(Matrix2<f64>, Option<Response>)>;
-
-fn respond(sim: &Simulation, map: &Mapping, du: &[P2]) -> (Responses, Vec<f64>) {
-    let pts = &sim.state.points;
-    let mut fint = vec![0.0; map.dofs.n_free];
-    let mut out = Vec::with_capacity(pts.len());
-    for p in 0..pts.len() {
-        let st = &map.stencils[p];
-        let df = increment_gradient(st, du);
-        if pts.vol0[p] == 0.0 {
-            out.push((df, None));
-            continue;
-        }
-        let r = sim.hencky(p).respond_stress(&df, &be_matrix(pts.b_e[p]));
-        for (n, _, g) in st.iter() {
-            for i in 0..2 {
-                if let Dof::Free(k) = map.dofs.node_dof[n][i] {
-                    fint[k] += (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * pts.vol0[p];
-                }
-            }
-        }
-        out.push((df, Some(r)));
-    }
-    (out, fint)
-}
-
 fn non_finite(step: usize, what: &str) -> StepFailure {
     StepFailure::NonFinite {
         step,
@@ -193,27 +200,31 @@ fn non_finite(step: usize, what: &str) -> StepFailure {
     }
 }
 
-/// Factorise the mass of this step (reusing the cached pattern when the
-/// blocks are unchanged). Returns the solver and whether the cache was hit.
+/// Factorise the consistent or stabilised mass of this step (reusing the
+/// cached pattern when the blocks are unchanged). Returns the solver and
+/// whether the cache was hit.
 fn factorise_mass(
     sim: &mut Simulation,
     map: &Mapping,
     faces: &[GhostFace],
     kind: MassKind,
     step: usize,
+    cached: &[[crate::basis::Weights1d; 2]],
 ) -> Result<(MassSolver, bool), StepFailure> {
-    let masses = &sim.state.points.mass;
-    if kind == MassKind::Lumped {
-        let d = lumped_mass(map, masses);
-        return Ok((MassSolver::Lumped(d), false));
-    }
     let blocks = blocks_of(map, faces);
-    let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
-    let reused = sim.mass_cache.pattern.is_some() && sim.mass_cache.key == key;
+    let cache = &sim.mass_cache;
+    let reused = cache.pattern.is_some()
+        && cache.key.len() == blocks.len()
+        && cache.key.iter().zip(&blocks).all(|(k, b)| k.as_slice() == *b);
     if !reused {
+        let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
         // The symbolic analysis needs values only for the structure.
-        let m = consistent_mass(map, &pattern, &blocks, faces, masses, 1.0);
+        let points = PointsOnGrid {
+            cached,
+            ..PointsOnGrid::of(sim)
+        };
+        let m = consistent_mass(map, &pattern, &blocks, faces, &points, 1.0);
         let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| StepFailure::Singular {
             step,
             reason: format!("mass matrix: {e}"),
@@ -229,7 +240,11 @@ fn factorise_mass(
     } else {
         0.0
     };
-    let m = consistent_mass(map, pattern, &blocks, faces, &sim.state.points.mass, gamma);
+    let points = PointsOnGrid {
+        cached,
+        ..PointsOnGrid::of(sim)
+    };
+    let m = consistent_mass(map, pattern, &blocks, faces, &points, gamma);
     let factor = linalg::cholesky_with(symbolic, &m).map_err(|e| StepFailure::Singular {
         step,
         reason: format!(
@@ -255,217 +270,250 @@ fn factorise_mass(
     Ok((MassSolver::Consistent(factor, m), reused))
 }
 
+/// One explicit step (see the module's documentation), with the buffers
+/// of [`Workspace`] reused from the last step.
 pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
+    let mut ws = std::mem::take(&mut sim.explicit);
+    let out = step_with(sim, &mut ws);
+    sim.explicit = ws;
+    out
+}
+
+fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let steps = sim.load_steps();
-    let a = sim.model.analysis.clone();
+    let a = &sim.model.analysis;
+    let (stress_update, velocity_update, blowup_factor, every) =
+        (a.stress_update, a.velocity_update, a.blowup_factor, a.condition_every);
     let dt = a.duration.unwrap_or(0.0) / steps as f64;
     let start = Instant::now();
     let mut timings = Timings::default();
     let h = sim.model.grid.h;
-
-    // 1. Map points; ghost faces for the stabilised mass.
-    let map = Mapping::build(
-        &sim.model.grid,
-        &sim.state.points,
-        &sim.model.bodies,
-        &sim.model.dirichlet,
-        0.0,
-    );
     let stabilised = a.mass == MassKind::Stabilised && sim.params.gamma_m > 0.0;
-    let faces = if stabilised {
-        ghost::faces_of(&sim.model.grid, &map, sim.model.analysis.ghost_cells)
-    } else {
-        Vec::new()
-    };
     let kind = if a.mass == MassKind::Stabilised && !stabilised {
         MassKind::Consistent
     } else {
         a.mass
     };
+    let grid = &sim.model.grid;
+    let Workspace {
+        transfer: tr,
+        map,
+        free,
+        lumped,
+        weights,
+    } = ws;
+    let basis: Vec<_> = sim.model.bodies.iter().map(|b| b.basis).collect();
+    transfer::cache_weights(grid, &sim.state.points, &basis, weights);
+    let bodies = Bodies {
+        basis,
+        material: sim
+            .model
+            .bodies
+            .iter()
+            .map(|b| sim.model.materials[b.material].hencky())
+            .collect(),
+        cached: weights,
+    };
+    tr.prepare(grid, &sim.model.dirichlet, sim.state.points.len());
 
-    // 2. Mass.
-    let t = Instant::now();
-    let (mass, pattern_reused) = factorise_mass(sim, &map, &faces, kind, step)?;
-    timings.factorisation = t.elapsed().as_secs_f64();
-
-    // 3. Momentum to grid velocities.
-    let t = Instant::now();
+    // 1. Map points: the lumped mass needs only the dofs and the active
+    // cells (found by the point-to-grid pass); the consistent ones their
+    // groups and, stabilised, the ghost faces (G 4.2).
     let pts = &sim.state.points;
-    let v0 = map_velocities(&map, &mass, &pts.mass, &pts.v);
+    let consistent = kind != MassKind::Lumped;
+    if consistent {
+        tr.map_groups(grid, pts, &bodies, map);
+    }
+    let faces = if stabilised {
+        ghost::faces_of(grid, map, sim.model.analysis.ghost_cells)
+    } else {
+        Vec::new()
+    };
+
+    // 2. Mass: nodal lumped mass and momentum in one pass.
+    let t = Instant::now();
+    tr.p2g(grid, pts, &bodies, &pts.v, (!consistent).then_some(&mut *map));
+    let (mass, pattern_reused) = if consistent {
+        factorise_mass(sim, map, &faces, kind, step, bodies.cached)?
+    } else {
+        let mut d = std::mem::take(lumped);
+        d.clear();
+        d.resize(map.dofs.n_free, 0.0);
+        for (n, dof) in map.dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = dof[c] {
+                    d[i] = tr.mass[n];
+                }
+            }
+        }
+        (MassSolver::Lumped(d), false)
+    };
+    timings.factorisation = t.elapsed().as_secs_f64();
+    let map: &Mapping = map;
+    let pts = &sim.state.points;
+    let grid = &sim.model.grid;
+
+    // 3. Momentum to grid velocities: M v = sum_p m_p S_p^T v_p (G (10)).
+    let t = Instant::now();
+    let [b, v0, ext, fint, rhs, acc, v1] = free;
+    transfer::gather_into(&map.dofs, &tr.momentum, b);
+    mass.solve_into(b, v0);
     if v0.iter().any(|v| !v.is_finite()) {
         return Err(non_finite(step, "grid velocity from the momentum"));
     }
-    let v0n = scatter(&map, &v0);
     timings.solve += t.elapsed().as_secs_f64();
 
-    // 4-5. Stress (USF) and forces, accelerations.
+    // 4-5. Stress (USF: dF = I + dt grad v_n) and forces, accelerations.
     let t = Instant::now();
-    let du0: Vec<P2> = v0n.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
-    let zero = vec![[0.0; 2]; du0.len()];
-    let (first, fint) = respond(
-        sim,
-        &map,
-        if a.stress_update == StressUpdate::Usf {
-            &du0
-        } else {
-            &zero
-        },
-    );
-    let (forces, boundaries) = sim.nodal_forces(&map, step, 1.0)?;
-    let rhs: Vec<f64> = forces.ext.iter().zip(&fint).map(|(e, i)| e - i).collect();
+    let usf = stress_update == StressUpdate::Usf;
+    transfer::scatter_into(&map.dofs, v0, Some(dt), &mut tr.nodal_a);
+    if !usf {
+        tr.nodal_a.iter_mut().for_each(|v| *v = [0.0; 2]);
+    }
+    let gravity = sim.model.gravity;
+    let first = tr.stress_pass(grid, pts, &bodies, gravity, true, usf);
+    // The free-dof internal force, then f_ext: body forces, point loads
+    // and tractions in that order (as `Simulation::nodal_forces`).
+    transfer::gather_into(&map.dofs, &tr.fint, fint);
+    if gravity != [0.0; 2] {
+        transfer::gather_into(&map.dofs, &tr.body_force, ext);
+    } else {
+        ext.clear();
+        ext.resize(map.dofs.n_free, 0.0);
+    }
+    for load in &sim.model.point_loads {
+        let st = crate::basis::stencil(
+            grid,
+            sim.model.bodies[pts.body[load.point]].basis,
+            pts.x[load.point],
+            pts.lp[load.point],
+        );
+        for (n, w, _) in st.iter() {
+            for c in 0..2 {
+                if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                    ext[i] += w * load.force[c];
+                }
+            }
+        }
+    }
+    let boundaries = sim.add_tractions(map, step, 1.0, ext)?;
+    rhs.clear();
+    rhs.extend(ext.iter().zip(fint.iter()).map(|(e, i)| e - i));
     timings.assembly += t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let acc = mass.solve(&rhs);
-    let v1: Vec<f64> = v0.iter().zip(&acc).map(|(v, a)| v + dt * a).collect();
+    mass.solve_into(rhs, acc);
+    v1.clear();
+    v1.extend(v0.iter().zip(acc.iter()).map(|(v, a)| v + dt * a));
     timings.solve += t.elapsed().as_secs_f64();
-    if acc.iter().chain(&v1).any(|v| !v.is_finite()) {
+    if acc.iter().chain(v1.iter()).any(|v| !v.is_finite()) {
         return Err(non_finite(step, "grid acceleration"));
     }
-    let (an, v1n) = (scatter(&map, &acc), scatter(&map, &v1));
+    transfer::scatter_into(&map.dofs, acc, None, &mut tr.nodal_a);
+    transfer::scatter_into(&map.dofs, v1, None, &mut tr.nodal_b);
     // Nodes that points barely touch may take large velocities without
     // moving anything; the points' own increments are what must stay small.
-    let max_speed = v1n.iter().map(|v| v[0].hypot(v[1])).fold(0.0, f64::max);
+    let max_speed = (tr.nodal_b.iter().zip(&map.dofs.node_dof))
+        .filter(|(_, d)| d[0] != Dof::Inactive)
+        .map(|(v, _)| v[0].hypot(v[1]))
+        .fold(0.0, f64::max);
 
     // 6-7. Points: velocities, positions, then (USL) stresses.
     let t = Instant::now();
-    let du1: Vec<P2> = v1n.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
-    let old = &sim.state.points;
-    let velocities: Vec<P2> = (0..old.len())
-        .map(|p| {
-            let st = &map.stencils[p];
-            match a.velocity_update {
-                VelocityUpdate::Flip => {
-                    let dv = st.interpolate(|n| an[n]);
-                    [old.v[p][0] + dt * dv[0], old.v[p][1] + dt * dv[1]]
-                }
-                VelocityUpdate::Pic => st.interpolate(|n| v1n[n]),
-            }
-        })
-        .collect();
-    let responses = match a.stress_update {
+    let moved = tr.g2p(grid, pts, &bodies, dt, velocity_update == VelocityUpdate::Flip);
+    let committed = match stress_update {
         StressUpdate::Usf => first,
-        StressUpdate::Usl => respond(sim, &map, &du1).0,
+        StressUpdate::Usl => {
+            let (du, v) = (&mut tr.nodal_a, &tr.nodal_b);
+            du.clear();
+            du.extend(v.iter().map(|v| [dt * v[0], dt * v[1]]));
+            tr.stress_pass(grid, pts, &bodies, gravity, false, true)
+        }
         StressUpdate::Musl => {
             // Sulsky's modified USL: the strain increment from the updated
             // point velocities mapped back to the grid with the same mass.
-            let v = scatter(&map, &map_velocities(&map, &mass, &old.mass, &velocities));
-            let du: Vec<P2> = v.iter().map(|v| [dt * v[0], dt * v[1]]).collect();
-            respond(sim, &map, &du).0
+            let velocities = std::mem::take(&mut tr.next.v);
+            tr.p2g_momentum(grid, pts, &bodies, &velocities);
+            tr.next.v = velocities;
+            // The momentum and f_int vectors are free again.
+            let (bm, vm) = (&mut *b, &mut *fint);
+            transfer::gather_into(&map.dofs, &tr.momentum, bm);
+            mass.solve_into(bm, vm);
+            transfer::scatter_into(&map.dofs, vm, Some(dt), &mut tr.nodal_a);
+            tr.stress_pass(grid, pts, &bodies, gravity, false, true)
         }
     };
-    let mut pts = sim.state.points.clone();
-    let (mut strain, mut dissipation) = (0.0, 0.0);
-    let mut fastest = (0.0f64, 0);
-    // Largest |dF - I| (Frobenius) of the step, and where.
-    let mut strained = (0.0f64, 0);
-    for p in 0..pts.len() {
-        let st = &map.stencils[p];
-        let dx = st.interpolate(|n| du1[n]);
-        if dx[0].hypot(dx[1]) > fastest.0 {
-            fastest = (dx[0].hypot(dx[1]), p);
+    let (strain, dissipation) = (committed.strain, committed.dissipation);
+    let (fastest, strained) = (moved.fastest, committed.strained);
+    let guards = (|| {
+        if let Some(p) = moved.non_finite {
+            return Err(non_finite(step, &format!("velocity at point {p}")));
         }
-        pts.x[p] = [pts.x[p][0] + dx[0], pts.x[p][1] + dx[1]];
-        pts.v[p] = velocities[p];
-        let (df, r) = &responses[p];
-        let stretch = (df - Matrix2::identity()).norm();
-        if !(stretch <= strained.0) {
-            strained = (stretch, p);
-        }
-        if let Some((w, d)) = commit_point(&mut pts, p, df, r.as_ref(), &sim.hencky(p)) {
-            strain += w;
-            dissipation += d;
-        }
-    }
-    if let Some(p) = (0..pts.len()).find(|&p| !(pts.v[p][0].is_finite() && pts.v[p][1].is_finite())) {
-        return Err(non_finite(step, &format!("velocity at point {p}")));
-    }
-    if fastest.0 > h {
-        return Err(StepFailure::Diverged {
-            step,
-            reason: format!(
-                "point {} would move {:.3e} m in one step, more than a cell (h = {h}, dt = {dt:.3e} s, largest grid speed {max_speed:.3e} m/s): the time step is too large or the {} mass is ill-conditioned",
-                fastest.1,
-                fastest.0,
-                mass_name(kind)
-            ),
-        });
-    }
-    // Explicit steps are small: a point whose deformation gradient changes by
-    // more than half in one step (or to a non-finite value) has diverged.
-    if !(strained.0 <= 0.5) {
-        return Err(StepFailure::Diverged {
-            step,
-            reason: format!(
-                "point {} would deform by |dF - I| = {:.3e} in one step (dt = {dt:.3e} s, largest grid speed {max_speed:.3e} m/s): the time step is too large or the {} mass is ill-conditioned",
-                strained.1,
-                strained.0,
-                mass_name(kind)
-            ),
-        });
-    }
-    crate::state::check_points(&sim.model.grid, &pts, step, &[])?;
-    // A GIMP domain reaching past the grid's edge loses nodes of its basis,
-    // and with them partition of unity and momentum conservation.
-    let grid = &sim.model.grid;
-    let (lo, hi) = (grid.origin, grid.max());
-    let tol = 1e-9 * h;
-    for p in 0..pts.len() {
-        if sim.model.bodies[pts.body[p]].basis != crate::basis::BasisKind::Gimp {
-            continue;
-        }
-        let (x, l) = (pts.x[p], pts.lp[p]);
-        let corner = [0, 1].map(|d| {
-            if x[d] - l[d] < lo[d] - tol {
-                x[d] - l[d]
-            } else if x[d] + l[d] > hi[d] + tol {
-                x[d] + l[d]
-            } else {
-                x[d]
-            }
-        });
-        if corner != x {
-            return Err(StepFailure::LeftGrid {
+        if fastest.0 > h {
+            return Err(StepFailure::Diverged {
                 step,
-                point: p,
-                position: corner,
-                domain: true,
+                reason: format!(
+                    "point {} would move {:.3e} m in one step, more than a cell (h = {h}, dt = {dt:.3e} s, largest grid speed {max_speed:.3e} m/s): the time step is too large or the {} mass is ill-conditioned",
+                    fastest.1,
+                    fastest.0,
+                    mass_name(kind)
+                ),
             });
         }
-    }
+        // Explicit steps are small: a point whose deformation gradient
+        // changes by more than half in one step (or to a non-finite value)
+        // has diverged.
+        if !(strained.0 <= 0.5) {
+            return Err(StepFailure::Diverged {
+                step,
+                reason: format!(
+                    "point {} would deform by |dF - I| = {:.3e} in one step (dt = {dt:.3e} s, largest grid speed {max_speed:.3e} m/s): the time step is too large or the {} mass is ill-conditioned",
+                    strained.1,
+                    strained.0,
+                    mass_name(kind)
+                ),
+            });
+        }
+        crate::state::check_points(grid, &tr.next, step, &[])?;
+        gimp_domains_inside(sim, &tr.next, step)
+    })();
+    guards?;
     timings.update = t.elapsed().as_secs_f64();
 
     // 8. Energies and the balance.
-    let work: f64 = forces.ext.iter().zip(&v1).map(|(f, v)| f * dt * v).sum();
-    let kinetic = pts.kinetic_energy();
+    let work: f64 = ext.iter().zip(v1.iter()).map(|(f, v)| f * dt * v).sum();
+    let kinetic = moved.kinetic;
     let external_work = sim.state.external_work + work;
     let w0 = sim.state.initial_energy;
     let energy_error = kinetic + strain + dissipation - external_work - w0;
     let scale = w0 + external_work.abs() + dissipation;
-    if scale > 0.0 && kinetic + strain > a.blowup_factor * scale {
+    if scale > 0.0 && kinetic + strain > blowup_factor * scale {
         return Err(StepFailure::Diverged {
             step,
             reason: format!(
                 "kinetic + strain energy {:.3e} J exceeds {} x (initial energy + work + dissipation) = {:.3e} J with the {} mass",
                 kinetic + strain,
-                a.blowup_factor,
-                a.blowup_factor * scale,
+                blowup_factor,
+                blowup_factor * scale,
                 mass_name(kind)
             ),
         });
     }
 
-    // Conditioning of this step's mass matrices, when asked.
+    // Conditioning of this step's mass matrices, when asked (on the
+    // mapping at the start of the step, as the points still are).
     let t = Instant::now();
-    let every = a.condition_every;
     let conditioning = (sim.params.condition != ConditionMode::Off && every > 0 && (step % every == 0 || step == 1))
         .then(|| {
+            // The conditioning's stiffness reads the stencils.
+            let model = &sim.model;
+            let map = &Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0);
             let faces = if faces.is_empty() {
-                ghost::faces_of(&sim.model.grid, &map, sim.model.analysis.ghost_cells)
+                ghost::faces_of(grid, map, sim.model.analysis.ghost_cells)
             } else {
                 faces.clone()
             };
-            conditioning_on(sim, &map, &faces)
+            conditioning_on(sim, map, &faces)
         });
     timings.condition = t.elapsed().as_secs_f64();
     let (condition, condition_unstabilised) = match &conditioning {
@@ -477,8 +525,20 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
         },
     };
 
-    let momentum = pts.momentum();
-    sim.commit(pts, step, work, &map, &faces, 0);
+    let (unknowns, active_nodes) = (map.dofs.n_free, map.dofs.active_nodes);
+    let residual_norm = norm(rhs);
+    let kinetic_grid = mass.energy(v1);
+    // Commit: the updated fields swap into the state; the cells of the
+    // step before go back to the workspace to be refilled.
+    let map = &mut ws.map;
+    std::mem::swap(&mut sim.state.active_cells, &mut map.active_cells);
+    tr.swap_points(&mut sim.state.points);
+    sim.state.step = step;
+    sim.state.external_work += work;
+    sim.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&sim.model.grid, f)).collect();
+    if let MassSolver::Lumped(d) = mass {
+        *lumped = d;
+    }
     let lambda = step as f64 / steps as f64;
     let errors = sim.exact_errors(lambda);
     timings.total = start.elapsed().as_secs_f64();
@@ -486,10 +546,10 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
         step,
         load_steps: steps,
         load_factor: lambda,
-        unknowns: map.dofs.n_free,
-        active_nodes: map.dofs.active_nodes,
-        active_cells: map.active_cells.len(),
-        residual_norm: norm(&rhs),
+        unknowns,
+        active_nodes,
+        active_cells: sim.state.active_cells.len(),
+        residual_norm,
         residuals: Vec::new(),
         timings,
         energy: Energy {
@@ -511,17 +571,52 @@ pub(crate) fn explicit_step(sim: &mut Simulation) -> Result<StepReport, StepFail
             dt,
             initial_energy: w0,
             energy_error,
-            momentum,
-            kinetic_grid: mass.energy(&v1),
+            momentum: moved.momentum,
+            kinetic_grid,
             max_speed,
             mass: kind,
-            stress_update: a.stress_update,
-            velocity_update: a.velocity_update,
+            stress_update,
+            velocity_update,
             pattern_reused,
             conditioning,
         }),
         solver: None,
     })
+}
+
+/// A GIMP domain reaching past the grid's edge loses nodes of its basis,
+/// and with them partition of unity and momentum conservation: the first
+/// point of `pts` (the step's updated points) whose domain does is the
+/// step's failure.
+fn gimp_domains_inside(sim: &Simulation, pts: &crate::points::Points, step: usize) -> Result<(), StepFailure> {
+    let grid = &sim.model.grid;
+    let (lo, hi) = (grid.origin, grid.max());
+    let tol = 1e-9 * grid.h;
+    let body = &sim.state.points.body;
+    for p in 0..pts.len() {
+        if sim.model.bodies[body[p]].basis != crate::basis::BasisKind::Gimp {
+            continue;
+        }
+        let (x, l) = (pts.x[p], pts.lp[p]);
+        let corner = [0, 1].map(|d| {
+            if x[d] - l[d] < lo[d] - tol {
+                x[d] - l[d]
+            } else if x[d] + l[d] > hi[d] + tol {
+                x[d] + l[d]
+            } else {
+                x[d]
+            }
+        });
+        if corner != x {
+            return Err(StepFailure::LeftGrid {
+                step,
+                point: p,
+                position: corner,
+                domain: true,
+            });
+        }
+    }
+    Ok(())
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -635,8 +730,9 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
     let masses = &sim.state.points.mass;
     let blocks = blocks_of(map, faces);
     let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-    let mc = consistent_mass(map, &pattern, &blocks, faces, masses, 0.0);
-    let ms = consistent_mass(map, &pattern, &blocks, faces, masses, sim.params.gamma_m);
+    let points = PointsOnGrid::of(sim);
+    let mc = consistent_mass(map, &pattern, &blocks, faces, &points, 0.0);
+    let ms = consistent_mass(map, &pattern, &blocks, faces, &points, sim.params.gamma_m);
     let (cond_c, fact_c) = spd_condition(&mc, mode, limit);
     let (cond_s, fact_s) = spd_condition(&ms, mode, limit);
     let lumped = lumped_mass(map, masses);
@@ -723,7 +819,14 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
     } else {
         let blocks = blocks_of(&map, &faces);
         let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
-        let m = consistent_mass(&map, &pattern, &blocks, &faces, &pts.mass, sim.params.gamma_m);
+        let m = consistent_mass(
+            &map,
+            &pattern,
+            &blocks,
+            &faces,
+            &PointsOnGrid::of(sim),
+            sim.params.gamma_m,
+        );
         MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
     };
     let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));

@@ -62,6 +62,8 @@ pub struct Simulation {
     pub(crate) state: State,
     /// Explicit dynamics: the mass pattern of the last step.
     pub(crate) mass_cache: MassCache,
+    /// Explicit dynamics: the step's buffers, reused from step to step.
+    pub(crate) explicit: crate::dynamics::ExplicitWorkspace,
     /// The observer's progress hook (behind a mutex so steps can call it
     /// through `&self`).
     progress: Option<std::sync::Mutex<ProgressHook>>,
@@ -103,6 +105,7 @@ impl Simulation {
             params,
             state,
             mass_cache: Default::default(),
+            explicit: Default::default(),
             progress: None,
             cancel: None,
         }
@@ -137,19 +140,6 @@ impl Simulation {
     /// Cells holding points after the last step.
     pub fn active_cells(&self) -> &[usize] {
         &self.state.active_cells
-    }
-
-    /// Make a completed step the current state.
-    pub(crate) fn commit(
-        &mut self,
-        points: Points,
-        step: usize,
-        work: f64,
-        map: &Mapping,
-        faces: &[ghost::GhostFace],
-        iterations: usize,
-    ) {
-        self.commit_cells(points, step, work, map.active_cells.clone(), faces, iterations);
     }
 
     fn commit_cells(

@@ -1,0 +1,532 @@
+//! The explicit step's point-grid transfers as tight loops over reused
+//! buffers (G 2.3, 3.3).
+//!
+//! A [`Workspace`] lives as long as the simulation and holds everything a
+//! step needs per grid node, per free dof and per point, so a step in its
+//! steady state allocates nothing. Each pass walks the points once in
+//! order and evaluates the basis from its 1D factors
+//! ([`crate::basis::weights_1d`], standard or GIMP) inside the loop:
+//! no stencil array, no dynamic dispatch, no per-point vectors. Every sum
+//! runs over the points in the same order, with the same expressions, as
+//! the stencil-based helpers of [`super`], so the results are the same to
+//! the bit.
+//!
+//! The updated points are written into [`Transfer::next`] and swapped
+//! into the state only once every guard has passed
+//! ([`Transfer::swap_points`]): a failed step leaves the last good state
+//! without copying it first.
+
+use crate::assembly::{reached_cells, Dof, DofMap, Mapping};
+use crate::basis::{weights_1d, BasisKind, Weights1d};
+use crate::geometry::P2;
+use crate::grid::Grid;
+use crate::kinematics::be_matrix;
+use crate::material::hencky::{right_stretch, Hencky};
+use crate::points::Points;
+use nalgebra::Matrix2;
+
+/// Buffers of the explicit step, reused from step to step.
+pub(crate) struct Workspace {
+    /// Nodal buffers, the next points and the passes over them.
+    pub(crate) transfer: Transfer,
+    /// Lumped steps: a mapping with the dofs and active cells only (no
+    /// stencils, no groups), refilled in place by [`Transfer::p2g`].
+    pub(crate) map: Mapping,
+    /// Free-dof vectors: momentum, `v_n`, `f_ext`, `f_int`, `f_ext - f_int`,
+    /// `a`, `v_{n+1}`.
+    pub(crate) free: [Vec<f64>; 7],
+    /// The lumped mass on the free dofs (kg).
+    pub(crate) lumped: Vec<f64>,
+    /// Per point, its 1D basis factors this step (GIMP scenes; see
+    /// [`cache_weights`]).
+    pub(crate) weights: Vec<[Weights1d; 2]>,
+}
+
+impl Default for Workspace {
+    fn default() -> Workspace {
+        Workspace {
+            transfer: Transfer::default(),
+            map: Mapping {
+                stencils: Vec::new(),
+                groups: Vec::new(),
+                dofs: DofMap::default(),
+                active_cells: Vec::new(),
+                populated_cells: Vec::new(),
+                cell_fill: Vec::new(),
+            },
+            free: Default::default(),
+            lumped: Vec::new(),
+            weights: Vec::new(),
+        }
+    }
+}
+
+/// Per grid node and per point: what the passes read and write.
+#[derive(Default)]
+pub(crate) struct Transfer {
+    /// Per grid node: lumped mass `sum_p m_p S_vp` (kg per unit thickness).
+    pub(crate) mass: Vec<f64>,
+    /// Per grid node: momentum `sum_p S_vp m_p v_p` (kg m/s).
+    pub(crate) momentum: Vec<P2>,
+    /// Per grid node: internal force `sum_p V0_p P_p grad S_vp` (N).
+    pub(crate) fint: Vec<P2>,
+    /// Per grid node: body force `sum_p S_vp m_p g` (N).
+    pub(crate) body_force: Vec<P2>,
+    /// Per grid node: the fields a pass reads (increments `dt v` for the
+    /// stress pass; accelerations and `v_{n+1}` for grid to points).
+    pub(crate) nodal_a: Vec<P2>,
+    pub(crate) nodal_b: Vec<P2>,
+    /// Per grid node: touched by a point with volume this step.
+    active: Vec<bool>,
+    /// Per grid cell: reached by a point's basis this step.
+    cells: Vec<bool>,
+    /// Per grid node, the prescribed components (value 0 in explicit
+    /// steps), computed once.
+    prescribed: Vec<[Option<f64>; 2]>,
+    /// Per point, the node rectangle `(i0, j0, ni, nj)` its basis touches
+    /// ([`crate::basis::Stencil::key`]; [`NO_GROUP`] for points without
+    /// volume), this step and the step the groups were built for.
+    keys: Vec<(u32, u32, u8, u8)>,
+    grouped: Vec<(u32, u32, u8, u8)>,
+    /// The points after the step (only the fields a step changes).
+    pub(crate) next: Points,
+}
+
+/// The key of a point in no group (no volume).
+const NO_GROUP: (u32, u32, u8, u8) = (u32::MAX, u32::MAX, 0, 0);
+
+/// Per body: its basis and finite-strain material; and the points' 1D
+/// basis factors of this step when they are cached.
+pub(crate) struct Bodies<'a> {
+    pub(crate) basis: Vec<BasisKind>,
+    pub(crate) material: Vec<Hencky>,
+    /// Per point, empty or its 1D factors at the start of the step (see
+    /// [`cache_weights`]).
+    pub(crate) cached: &'a [[Weights1d; 2]],
+}
+
+impl Bodies<'_> {
+    /// Point `p`'s 1D basis factors at its position: cached, or evaluated.
+    #[inline(always)]
+    pub(crate) fn weights(&self, grid: &Grid, pts: &Points, p: usize) -> [Weights1d; 2] {
+        match self.cached.get(p) {
+            Some(w) => *w,
+            None => weights_1d(grid, self.basis[pts.body[p]], pts.x[p], pts.lp[p]),
+        }
+    }
+}
+
+/// With a GIMP body, the 1D basis factors of every point into `out` (as
+/// the passes read them five times a step and GIMP's are dear to
+/// evaluate); without, `out` is left empty: the standard basis is cheaper
+/// to evaluate in the loops than to read back.
+pub(crate) fn cache_weights(grid: &Grid, pts: &Points, basis: &[BasisKind], out: &mut Vec<[Weights1d; 2]>) {
+    out.clear();
+    if basis.contains(&BasisKind::Gimp) {
+        out.extend((0..pts.len()).map(|p| weights_1d(grid, basis[pts.body[p]], pts.x[p], pts.lp[p])));
+    }
+}
+
+/// Call `f(node, S_vp, grad S_vp)` for the nodes of a point's stencil in
+/// the order of [`crate::basis::stencil`] (row by row), from its 1D
+/// factors: `S = wx wy`, `grad S = [wx' wy, wx wy']` (1, 1/m).
+#[inline(always)]
+fn for_each_node(grid: &Grid, w: &[Weights1d; 2], mut f: impl FnMut(usize, f64, [f64; 2])) {
+    let [wx, wy] = w;
+    let stride = grid.nx + 1;
+    for b in 0..wy.len {
+        let row = (wy.first + b) * stride + wx.first;
+        for a in 0..wx.len {
+            f(row + a, wx.w[a] * wy.w[b], [wx.dw[a] * wy.w[b], wx.w[a] * wy.dw[b]]);
+        }
+    }
+}
+
+/// A point's stencil weights `S_vp` in the order of
+/// [`crate::basis::stencil`] (row by row) and how many there are.
+#[inline]
+pub(crate) fn stencil_weights(grid: &Grid, w: &[Weights1d; 2]) -> (usize, [f64; crate::basis::MAX_NODES]) {
+    let mut out = [0.0; crate::basis::MAX_NODES];
+    let mut k = 0;
+    for_each_node(grid, w, |_, w, _| {
+        out[k] = w;
+        k += 1;
+    });
+    (k, out)
+}
+
+fn reset<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
+    v.clear();
+    v.resize(len, value);
+}
+
+/// Values on the free dofs from per-node pairs, into `out` (length
+/// `n_free`).
+pub(crate) fn gather_into(dofs: &DofMap, nodal: &[P2], out: &mut Vec<f64>) {
+    reset(out, dofs.n_free, 0.0);
+    for (n, d) in dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                out[i] = nodal[n][c];
+            }
+        }
+    }
+}
+
+/// Per-node pairs from values on the free dofs, `scale * free` (0 on the
+/// other components), into `out` (one pair per grid node).
+pub(crate) fn scatter_into(dofs: &DofMap, free: &[f64], scale: Option<f64>, out: &mut Vec<P2>) {
+    reset(out, dofs.node_dof.len(), [0.0; 2]);
+    for (n, d) in dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                out[n][c] = match scale {
+                    Some(s) => s * free[i],
+                    None => free[i],
+                };
+            }
+        }
+    }
+}
+
+/// What the commit of the points' increments found: summed energies and
+/// the largest `|dF - I|`.
+pub(crate) struct Committed {
+    /// `sum_p V0_p psi(b_e)` (J per unit thickness).
+    pub(crate) strain: f64,
+    /// `sum_p` of the points' plastic dissipation so far (J).
+    pub(crate) dissipation: f64,
+    /// Largest Frobenius `|dF - I|` (or the first NaN) and its point.
+    pub(crate) strained: (f64, usize),
+}
+
+/// What the grid-to-point pass found.
+pub(crate) struct Moved {
+    /// Largest point displacement of the step (m) and its point.
+    pub(crate) fastest: (f64, usize),
+    /// First point with a non-finite velocity.
+    pub(crate) non_finite: Option<usize>,
+    /// `sum_p 1/2 m_p |v_p|^2` (J) and `sum_p m_p v_p` (kg m/s) after the step.
+    pub(crate) kinetic: f64,
+    pub(crate) momentum: P2,
+}
+
+impl Transfer {
+    /// Size the buffers for `grid` and `n` points (no allocation once
+    /// sized) and compute the prescribed components on the first step.
+    pub(crate) fn prepare(&mut self, grid: &Grid, dirichlet: &[crate::model::GridDirichlet], n: usize) {
+        let nodes = grid.num_nodes();
+        if self.prescribed.len() != nodes {
+            self.prescribed = crate::assembly::prescribed(grid, dirichlet, 0.0);
+        }
+        let next = &mut self.next;
+        next.x.resize(n, [0.0; 2]);
+        next.v.resize(n, [0.0; 2]);
+        next.def_grad.resize(n, [0.0; 4]);
+        next.vol.resize(n, 0.0);
+        next.lp.resize(n, [0.0; 2]);
+        next.stress.resize(n, [0.0; 3]);
+        next.szz.resize(n, 0.0);
+        next.b_e.resize(n, [0.0; 4]);
+        next.dissipation.resize(n, 0.0);
+        next.yielding.resize(n, false);
+    }
+
+    /// Point to grid: nodal lumped mass and momentum of `velocities` over
+    /// every point (G (10)); with `map` (lumped steps), also the nodes and
+    /// cells the points with volume reach, numbered into its dofs and
+    /// active cells.
+    pub(crate) fn p2g(
+        &mut self,
+        grid: &Grid,
+        pts: &Points,
+        bodies: &Bodies,
+        velocities: &[P2],
+        map: Option<&mut Mapping>,
+    ) {
+        let activity = map.is_some();
+        let nodes = grid.num_nodes();
+        reset(&mut self.mass, nodes, 0.0);
+        reset(&mut self.momentum, nodes, [0.0; 2]);
+        if activity {
+            reset(&mut self.active, nodes, false);
+            reset(&mut self.cells, grid.num_cells(), false);
+        }
+        let (mass, momentum, active) = (&mut self.mass, &mut self.momentum, &mut self.active);
+        for p in 0..pts.len() {
+            let kind = bodies.basis[pts.body[p]];
+            let w = bodies.weights(grid, pts, p);
+            let (m, v) = (pts.mass[p], velocities[p]);
+            let with_volume = activity && pts.vol[p] > 0.0;
+            for_each_node(grid, &w, |n, w, _| {
+                mass[n] += m * w;
+                momentum[n][0] += w * m * v[0];
+                momentum[n][1] += w * m * v[1];
+                if with_volume {
+                    active[n] = true;
+                }
+            });
+            if activity && pts.vol[p] != 0.0 {
+                let cells = &mut self.cells;
+                reached_cells(grid, kind, pts.x[p], pts.lp[p], pts.vol[p], |c, _| cells[c] = true);
+            }
+        }
+        if let Some(map) = map {
+            map.dofs.number(&self.active, &self.prescribed);
+            map.active_cells.clear();
+            map.active_cells
+                .extend((0..self.cells.len()).filter(|&c| self.cells[c]));
+        }
+    }
+
+    /// Fill `map` as [`Mapping::build`] does, except its stencils (left
+    /// empty: the passes evaluate the basis themselves): the groups of
+    /// points with volume by node rectangle (rebuilt only when a point
+    /// changed rectangle since they were built), the active nodes, their
+    /// dofs, the reached, populated and filled cells. What the consistent
+    /// and stabilised masses and the ghost faces read.
+    pub(crate) fn map_groups(&mut self, grid: &Grid, pts: &Points, bodies: &Bodies, map: &mut Mapping) {
+        self.keys.clear();
+        self.keys.extend((0..pts.len()).map(|p| {
+            if pts.vol[p] > 0.0 {
+                let [wx, wy] = bodies.weights(grid, pts, p);
+                (wx.first as u32, wy.first as u32, wx.len as u8, wy.len as u8)
+            } else {
+                NO_GROUP
+            }
+        }));
+        if self.keys != self.grouped || map.groups.is_empty() {
+            let mut order: Vec<usize> = (0..pts.len()).filter(|&p| self.keys[p] != NO_GROUP).collect();
+            order.sort_unstable_by_key(|&p| (self.keys[p], p));
+            map.groups.clear();
+            for run in order.chunk_by(|&p, &q| self.keys[p] == self.keys[q]) {
+                let (i0, j0, ni, nj) = self.keys[run[0]];
+                let nodes = (0..nj as usize)
+                    .flat_map(|b| (0..ni as usize).map(move |a| grid.node(i0 as usize + a, j0 as usize + b)))
+                    .collect();
+                map.groups.push(crate::assembly::Group {
+                    nodes,
+                    points: run.to_vec(),
+                });
+            }
+            std::mem::swap(&mut self.keys, &mut self.grouped);
+        }
+        reset(&mut self.active, grid.num_nodes(), false);
+        for g in &map.groups {
+            for &n in &g.nodes {
+                self.active[n] = true;
+            }
+        }
+        reset(&mut self.cells, grid.num_cells(), false);
+        reset(&mut map.cell_fill, grid.num_cells(), 0.0);
+        let (cells, fill) = (&mut self.cells, &mut map.cell_fill);
+        for p in 0..pts.len() {
+            if pts.vol[p] == 0.0 {
+                continue;
+            }
+            reached_cells(
+                grid,
+                bodies.basis[pts.body[p]],
+                pts.x[p],
+                pts.lp[p],
+                pts.vol[p],
+                |c, f| {
+                    cells[c] = true;
+                    fill[c] += f;
+                },
+            );
+        }
+        map.active_cells.clear();
+        map.active_cells.extend((0..cells.len()).filter(|&c| cells[c]));
+        cells.iter_mut().for_each(|c| *c = false);
+        for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+            if let Some((i, j)) = grid.cell_of(pts.x[p]) {
+                cells[j * grid.nx + i] = true;
+            }
+        }
+        map.populated_cells.clear();
+        map.populated_cells.extend((0..cells.len()).filter(|&c| cells[c]));
+        map.dofs.number(&self.active, &self.prescribed);
+    }
+
+    /// Point to grid: nodal momentum only (MUSL's second mapping).
+    pub(crate) fn p2g_momentum(&mut self, grid: &Grid, pts: &Points, bodies: &Bodies, velocities: &[P2]) {
+        reset(&mut self.momentum, grid.num_nodes(), [0.0; 2]);
+        let momentum = &mut self.momentum;
+        for p in 0..pts.len() {
+            let w = bodies.weights(grid, pts, p);
+            let (m, v) = (pts.mass[p], velocities[p]);
+            for_each_node(grid, &w, |n, w, _| {
+                momentum[n][0] += w * m * v[0];
+                momentum[n][1] += w * m * v[1];
+            });
+        }
+    }
+
+    /// The stress pass over the points, with the nodal increments `du`
+    /// (m, per grid node) in [`Transfer::nodal_a`]: per point
+    /// `dF = I + sum_v du_v (x) grad S_v` and the material's response
+    /// (points with `V0 > 0`). With `forces`: the nodal internal force
+    /// `sum_p V0_p P_p grad S` (`P = tau dF^-T`) and body force
+    /// `sum_p S m_p g` (points with `V > 0`; `gravity` m/s^2). With
+    /// `commit`: the points' updated `F`, `V`, GIMP domains, stresses,
+    /// `b_e`, dissipation into [`Transfer::next`] (as
+    /// [`crate::kinematics::commit_point`]), their energies and the
+    /// largest `|dF - I|`.
+    pub(crate) fn stress_pass(
+        &mut self,
+        grid: &Grid,
+        pts: &Points,
+        bodies: &Bodies,
+        gravity: P2,
+        forces: bool,
+        commit: bool,
+    ) -> Committed {
+        let nodes = grid.num_nodes();
+        if forces {
+            reset(&mut self.fint, nodes, [0.0; 2]);
+            if gravity != [0.0; 2] {
+                reset(&mut self.body_force, nodes, [0.0; 2]);
+            }
+        }
+        let mut out = Committed {
+            strain: 0.0,
+            dissipation: 0.0,
+            strained: (0.0, 0),
+        };
+        let (du, fint, body_force, next) = (&self.nodal_a, &mut self.fint, &mut self.body_force, &mut self.next);
+        for p in 0..pts.len() {
+            let body = pts.body[p];
+            let w = bodies.weights(grid, pts, p);
+            let mut g = [[0.0; 2]; 2];
+            for_each_node(grid, &w, |n, _, dw| {
+                let v = du[n];
+                for i in 0..2 {
+                    for j in 0..2 {
+                        g[i][j] += v[i] * dw[j];
+                    }
+                }
+            });
+            let df = Matrix2::new(1.0 + g[0][0], g[0][1], g[1][0], 1.0 + g[1][1]);
+            let (vol0, material) = (pts.vol0[p], &bodies.material[body]);
+            let r = (vol0 != 0.0).then(|| material.respond_stress(&df, &be_matrix(pts.b_e[p])));
+            if forces {
+                if let Some(r) = &r {
+                    let pk = [[r.p[(0, 0)], r.p[(0, 1)]], [r.p[(1, 0)], r.p[(1, 1)]]];
+                    for_each_node(grid, &w, |n, _, dw| {
+                        for i in 0..2 {
+                            fint[n][i] += (pk[i][0] * dw[0] + pk[i][1] * dw[1]) * vol0;
+                        }
+                    });
+                }
+                if gravity != [0.0; 2] && pts.vol[p] != 0.0 {
+                    let m = pts.mass[p];
+                    for_each_node(grid, &w, |n, w, _| {
+                        body_force[n][0] += w * m * gravity[0];
+                        body_force[n][1] += w * m * gravity[1];
+                    });
+                }
+            }
+            if !commit {
+                continue;
+            }
+            let stretch = (df - Matrix2::identity()).norm();
+            if !(stretch <= out.strained.0) {
+                out.strained = (stretch, p);
+            }
+            // As `kinematics::commit_point`, into the next state.
+            let fo = pts.def_grad[p];
+            let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
+            next.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
+            next.vol[p] = pts.vol[p] * df.determinant();
+            let (l0, u) = (pts.lp0[p], right_stretch(&f));
+            next.lp[p] = [l0[0] * u[(0, 0)], l0[1] * u[(1, 1)]];
+            match r {
+                Some(r) => {
+                    let s = r.tau / f.determinant();
+                    next.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
+                    next.szz[p] = s[(2, 2)];
+                    next.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
+                    next.dissipation[p] = pts.dissipation[p] + r.dissipation * vol0;
+                    next.yielding[p] = r.yielding;
+                    out.strain += vol0 * material.stored_energy(&r.b_e);
+                    out.dissipation += next.dissipation[p];
+                }
+                None => {
+                    next.stress[p] = pts.stress[p];
+                    next.szz[p] = pts.szz[p];
+                    next.b_e[p] = pts.b_e[p];
+                    next.dissipation[p] = pts.dissipation[p];
+                    next.yielding[p] = pts.yielding[p];
+                }
+            }
+        }
+        out
+    }
+
+    /// Grid to points with the nodal accelerations `a` in
+    /// [`Transfer::nodal_a`] and new velocities `v_{n+1}` in
+    /// [`Transfer::nodal_b`] (m/s^2, m/s): FLIP `v_p += dt sum S a` or PIC
+    /// `v_p = sum S v`, and `x_p += dt sum S v` into [`Transfer::next`].
+    pub(crate) fn g2p(&mut self, grid: &Grid, pts: &Points, bodies: &Bodies, dt: f64, flip: bool) -> Moved {
+        let mut out = Moved {
+            fastest: (0.0, 0),
+            non_finite: None,
+            kinetic: 0.0,
+            momentum: [0.0; 2],
+        };
+        let (an, vn, next) = (&self.nodal_a, &self.nodal_b, &mut self.next);
+        for p in 0..pts.len() {
+            let w = bodies.weights(grid, pts, p);
+            let (mut a, mut v) = ([0.0; 2], [0.0; 2]);
+            for_each_node(grid, &w, |n, w, _| {
+                if flip {
+                    a[0] += w * an[n][0];
+                    a[1] += w * an[n][1];
+                }
+                v[0] += w * vn[n][0];
+                v[1] += w * vn[n][1];
+            });
+            let vp = if flip {
+                [pts.v[p][0] + dt * a[0], pts.v[p][1] + dt * a[1]]
+            } else {
+                v
+            };
+            // `x += sum S (dt v)`, as the increments `dt v_v` interpolate.
+            let mut dx = [0.0; 2];
+            for_each_node(grid, &w, |n, w, _| {
+                dx[0] += w * (dt * vn[n][0]);
+                dx[1] += w * (dt * vn[n][1]);
+            });
+            let d = dx[0].hypot(dx[1]);
+            if d > out.fastest.0 {
+                out.fastest = (d, p);
+            }
+            next.x[p] = [pts.x[p][0] + dx[0], pts.x[p][1] + dx[1]];
+            next.v[p] = vp;
+            if out.non_finite.is_none() && !(vp[0].is_finite() && vp[1].is_finite()) {
+                out.non_finite = Some(p);
+            }
+            let m = pts.mass[p];
+            out.kinetic += 0.5 * m * (vp[0].powi(2) + vp[1].powi(2));
+            out.momentum = [out.momentum[0] + m * vp[0], out.momentum[1] + m * vp[1]];
+        }
+        out
+    }
+
+    /// Make the step's points the state's: swap the fields a step updates
+    /// between `points` and [`Transfer::next`] (no copy).
+    pub(crate) fn swap_points(&mut self, points: &mut Points) {
+        let next = &mut self.next;
+        std::mem::swap(&mut points.x, &mut next.x);
+        std::mem::swap(&mut points.v, &mut next.v);
+        std::mem::swap(&mut points.def_grad, &mut next.def_grad);
+        std::mem::swap(&mut points.vol, &mut next.vol);
+        std::mem::swap(&mut points.lp, &mut next.lp);
+        std::mem::swap(&mut points.stress, &mut next.stress);
+        std::mem::swap(&mut points.szz, &mut next.szz);
+        std::mem::swap(&mut points.b_e, &mut next.b_e);
+        std::mem::swap(&mut points.dissipation, &mut next.dissipation);
+        std::mem::swap(&mut points.yielding, &mut next.yielding);
+    }
+}
