@@ -78,6 +78,9 @@ enum Cmd {
         scene: PathBuf,
         #[arg(long)]
         result: PathBuf,
+        /// Record the run to this file.
+        #[arg(long)]
+        record: Option<PathBuf>,
     },
     /// Open a recording in the rerun viewer (or say how to install it).
     Replay { recording: PathBuf },
@@ -175,7 +178,7 @@ fn main() -> ExitCode {
         Some(Cmd::Check { scene, max_memory }) => check(&scene, &limits(max_memory)),
         Some(Cmd::List { dir }) => list(&dir),
         Some(Cmd::Sweep(args)) => sweep(args),
-        Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
+        Some(Cmd::SweepRun { scene, result, record }) => sweep_run(&scene, &result, record.as_deref()),
         Some(Cmd::Replay { recording }) => replay(&recording),
         Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
         Some(Cmd::Tui {
@@ -643,6 +646,11 @@ struct SweepArgs {
     /// Write one command per pending run to <out>/jobs.txt instead of running.
     #[arg(long)]
     emit_jobs: bool,
+    /// Record each run to <out>/recordings/<id>.rrd (with the scene's
+    /// `[record]` settings, which `--vary record.every=...` can change);
+    /// the CSV then holds the recording's size per step and per point.
+    #[arg(long)]
+    record: bool,
     /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     collect: Option<PathBuf>,
@@ -802,7 +810,7 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         runs.len() - todo.len()
     );
     if a.emit_jobs {
-        let p = driver::emit_jobs(&folder, &exe, &todo).map_err(anyhow::Error::msg)?;
+        let p = driver::emit_jobs(&folder, &exe, &todo, a.record).map_err(anyhow::Error::msg)?;
         let p = std::path::absolute(&p).unwrap_or(p);
         out!(
             "wrote {} commands to {} (absolute paths: run them from any directory, e.g. `parallel < {}`), then `mpmlab sweep --collect {}`",
@@ -813,7 +821,9 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         );
         return Ok(ExitCode::SUCCESS);
     }
-    driver::execute(&folder, &exe, &todo, usize::from(a.jobs), &|line| out!("{line}"));
+    driver::execute(&folder, &exe, &todo, usize::from(a.jobs), a.record, &|line| {
+        out!("{line}")
+    });
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
     Ok(ExitCode::SUCCESS)
 }
@@ -862,8 +872,8 @@ fn sweep_view(dir: &Path) -> Result<ExitCode> {
 }
 
 /// `mpmlab sweep-run`: one run, its result row to `result`.
-fn sweep_run(scene: &Path, result: &Path) -> Result<ExitCode> {
-    let r = mpmlab::sweep::run_file(scene);
+fn sweep_run(scene: &Path, result: &Path, record: Option<&Path>) -> Result<ExitCode> {
+    let r = mpmlab::sweep::run_file_recorded(scene, record);
     if let Some(dir) = result.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
