@@ -8,16 +8,18 @@
 //! |---|---|---|
 //! | `scene` | TextDocument (the scene file) | static |
 //! | `grid` | LineStrips2D | static |
-//! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
-//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of every field (`sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | every step |
-//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
-//! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | every step |
+//! | `recording` | TextDocument (the cadence and the per-point fields) | static |
+//! | `recording/fields` | TextLog (the per-point fields, comma-separated) | static |
+//! | `grid/active` | LineStrips2D (outlines of cells holding points) | frames |
+//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of the recorded fields (of `sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | frames |
+//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | frames |
+//! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | frames |
 //! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,violation_rms,cut_cells}` | Scalars | every step |
-//! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | every step |
+//! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | frames |
 //! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
 //! | `metrics/newton/iterations`, `metrics/ghost/faces`, `metrics/energy/plastic_dissipation` | Scalars | every step |
-//! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | every step |
-//! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | every step |
+//! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | frames |
+//! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | frames |
 //! | `metrics/boundary/<name>/{length,area,cells_cut,resultant_x,resultant_y}` | Scalars | every step |
 //! | `metrics/residual` | Scalars, on `iteration` | every iteration |
 //! | `metrics/condition/stiffness` | Scalars | every step |
@@ -30,6 +32,14 @@
 //! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (explicit dynamics) | every step |
 //! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, failures, end) | as they happen |
+//!
+//! "Frames" are the steps the cadence picks ([`crate::model::record`]:
+//! scene `[record]`, or the command line's `--record-every`,
+//! `--record-dt`, `--record-fields`), plus the initial state, the last
+//! step, the state before a failed step and the state a run stops on; at
+//! cadence 1 with every field a recording holds what it held before
+//! cadences existed. The step timeline shows which steps hold points (the
+//! `points` entity is logged at those steps only).
 //!
 //! The file also holds a blueprint (rerun's stored layout, [`layout`]) so
 //! the viewer opens on the scene with the metrics beside it.
@@ -353,7 +363,17 @@ impl Recorder {
         // Fail early and clearly on an unwritable path (the file sink would
         // only report it from its writer thread).
         std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
-        let mut builder = RecordingStreamBuilder::new(APP_ID);
+        // Metrics arrive a few dozen scalars a step: batched over a second
+        // (rerun's default for files is 200 ms), a chunk holds many steps
+        // instead of one, which keeps the per-chunk overhead (about a
+        // kilobyte) from dominating a long run's file. At most 16 MiB
+        // (a few point frames of a large run) wait in the batcher.
+        let batching = rerun::log::ChunkBatcherConfig {
+            flush_tick: std::time::Duration::from_secs(1),
+            flush_num_bytes: 16 * 1024 * 1024,
+            ..rerun::log::ChunkBatcherConfig::DEFAULT
+        };
+        let mut builder = RecordingStreamBuilder::new(APP_ID).batcher_config(batching);
         if deterministic {
             builder = builder.recording_id("mpmlab-test");
         }
