@@ -46,6 +46,8 @@ enum Cmd {
         /// Replace an existing --record file whatever it holds.
         #[arg(long, requires = "record")]
         force: bool,
+        #[command(flatten)]
+        cadence: RecordArgs,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
@@ -76,6 +78,9 @@ enum Cmd {
         scene: PathBuf,
         #[arg(long)]
         result: PathBuf,
+        /// Record the run to this file.
+        #[arg(long)]
+        record: Option<PathBuf>,
     },
     /// Open a recording in the rerun viewer (or say how to install it).
     Replay { recording: PathBuf },
@@ -91,14 +96,60 @@ enum Cmd {
         /// Replace an existing --record file whatever it holds.
         #[arg(long, requires = "record")]
         force: bool,
+        #[command(flatten)]
+        cadence: RecordArgs,
         /// Refuse scenes whose estimated memory exceeds this (bytes, or
         /// with k, M, G, T); default half of the available memory.
         #[arg(long, value_name = "SIZE", value_parser = parse_size)]
         max_memory: Option<u64>,
         /// Show a sweep folder instead (table, error against time and h).
-        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory"])]
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory", "record_every", "record_dt", "record_fields"])]
         sweep: Option<PathBuf>,
     },
+}
+
+/// What a recording holds, over the scene's `[record]` settings.
+#[derive(clap::Args, Clone, Default)]
+struct RecordArgs {
+    /// Record the points every N steps (metrics and events go in at every
+    /// step; the first, last and failed steps always hold points).
+    /// Overrides the scene's `[record]` cadence; default: every step up to
+    /// a budget of 5 million points times frames.
+    #[arg(long, value_name = "N", conflicts_with = "record_dt")]
+    record_every: Option<usize>,
+    /// Explicit dynamics: record the points every T seconds of simulated time.
+    #[arg(long, value_name = "T")]
+    record_dt: Option<f64>,
+    /// Per-point fields recorded with the positions, comma-separated
+    /// (sigma_xx, sigma_yy, sigma_xy, displacement_magnitude,
+    /// plastic_strain, speed, error; `all` for every one; default sigma_yy).
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    record_fields: Option<Vec<String>>,
+}
+
+impl RecordArgs {
+    fn given(&self) -> bool {
+        self.record_every.is_some() || self.record_dt.is_some() || self.record_fields.is_some()
+    }
+
+    /// The scene's settings with these over them.
+    fn settings(&self, sim: &Simulation) -> Result<mpmlab::model::record::RecordSettings, String> {
+        use mpmlab::model::record::{check_cadence, parse_fields, Cadence};
+        let mut s = sim.model().record.clone();
+        let cadence = match (self.record_every, self.record_dt) {
+            (Some(n), _) => Some(("--record-every", Cadence::Every(n))),
+            (None, Some(t)) => Some(("--record-dt", Cadence::Dt(t))),
+            (None, None) => None,
+        };
+        if let Some((flag, c)) = cadence {
+            check_cadence(c, sim.model().analysis.kind).map_err(|(_, m)| format!("{flag}: {m}"))?;
+            s.cadence = c;
+        }
+        if let Some(f) = &self.record_fields {
+            s.fields = parse_fields(f).map_err(|m| format!("--record-fields: {m}"))?;
+        }
+        Ok(s)
+    }
 }
 
 /// A `--max-memory` value.
@@ -120,13 +171,14 @@ fn main() -> ExitCode {
             scene,
             record,
             force,
+            cadence,
             quiet,
             max_memory,
-        }) => run(&scene, record.as_deref(), force, quiet, &limits(max_memory)),
+        }) => run(&scene, record.as_deref(), force, &cadence, quiet, &limits(max_memory)),
         Some(Cmd::Check { scene, max_memory }) => check(&scene, &limits(max_memory)),
         Some(Cmd::List { dir }) => list(&dir),
         Some(Cmd::Sweep(args)) => sweep(args),
-        Some(Cmd::SweepRun { scene, result }) => sweep_run(&scene, &result),
+        Some(Cmd::SweepRun { scene, result, record }) => sweep_run(&scene, &result, record.as_deref()),
         Some(Cmd::Replay { recording }) => replay(&recording),
         Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
         Some(Cmd::Tui {
@@ -134,10 +186,18 @@ fn main() -> ExitCode {
             record,
             no_record,
             force,
+            cadence,
             max_memory,
             sweep: None,
-        }) => tui(scene.as_deref(), record, no_record, force, &limits(max_memory)),
-        None => tui(None, None, false, false, &Limits::default()),
+        }) => tui(
+            scene.as_deref(),
+            record,
+            no_record,
+            force,
+            &cadence,
+            &limits(max_memory),
+        ),
+        None => tui(None, None, false, false, &RecordArgs::default(), &Limits::default()),
     };
     match result {
         Ok(code) => code,
@@ -421,7 +481,18 @@ impl Observer for Table {
     }
 }
 
-fn run(path: &Path, record: Option<&Path>, force: bool, quiet: bool, limits: &Limits) -> Result<ExitCode> {
+fn run(
+    path: &Path,
+    record: Option<&Path>,
+    force: bool,
+    cadence: &RecordArgs,
+    quiet: bool,
+    limits: &Limits,
+) -> Result<ExitCode> {
+    if record.is_none() && cadence.given() {
+        eprintln!("error: --record-every, --record-dt and --record-fields need --record FILE");
+        return Ok(ExitCode::from(2));
+    }
     if let Some(r) = record {
         if let Err(e) = check_record_target(r, Some(path), force) {
             eprintln!("error: {e}");
@@ -432,8 +503,15 @@ fn run(path: &Path, record: Option<&Path>, force: bool, quiet: bool, limits: &Li
         Ok(s) => s,
         Err(code) => return Ok(code),
     };
+    let settings = match cadence.settings(&sim) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
     let mut recorder = match record {
-        Some(p) => match Recorder::create(p, &text, &sim, false) {
+        Some(p) => match Recorder::create_with(p, &text, &sim, false, settings) {
             Ok(r) => Some(r),
             Err(e) => {
                 eprintln!("error: {e}");
@@ -548,8 +626,10 @@ fn run(path: &Path, record: Option<&Path>, force: bool, quiet: bool, limits: &Li
             );
         }
     }
-    if let Some(rec) = recorder {
+    if let Some(mut rec) = recorder {
         let p = rec.path().display().to_string();
+        // The last state reached, whatever the cadence.
+        let _ = rec.log_final_state(&sim);
         let _ = rec.event(
             if code == ExitCode::SUCCESS {
                 "run complete"
@@ -559,7 +639,10 @@ fn run(path: &Path, record: Option<&Path>, force: bool, quiet: bool, limits: &Li
             "INFO",
         );
         match rec.finish() {
-            Ok(()) => out!("recording: {p}  (replay: rerun {p})"),
+            Ok(size) => {
+                out!("recording: {p}  (replay: rerun {p})");
+                out!("recording size: {size}");
+            }
             Err(e) => {
                 eprintln!("error: {e}");
                 code = ExitCode::from(3);
@@ -591,6 +674,11 @@ struct SweepArgs {
     /// Write one command per pending run to <out>/jobs.txt instead of running.
     #[arg(long)]
     emit_jobs: bool,
+    /// Record each run to <out>/recordings/<id>.rrd (with the scene's
+    /// `[record]` settings, which `--vary record.every=...` can change);
+    /// the CSV then holds the recording's size per step and per point.
+    #[arg(long)]
+    record: bool,
     /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     collect: Option<PathBuf>,
@@ -750,7 +838,7 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         runs.len() - todo.len()
     );
     if a.emit_jobs {
-        let p = driver::emit_jobs(&folder, &exe, &todo).map_err(anyhow::Error::msg)?;
+        let p = driver::emit_jobs(&folder, &exe, &todo, a.record).map_err(anyhow::Error::msg)?;
         let p = std::path::absolute(&p).unwrap_or(p);
         out!(
             "wrote {} commands to {} (absolute paths: run them from any directory, e.g. `parallel < {}`), then `mpmlab sweep --collect {}`",
@@ -761,7 +849,9 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         );
         return Ok(ExitCode::SUCCESS);
     }
-    driver::execute(&folder, &exe, &todo, usize::from(a.jobs), &|line| out!("{line}"));
+    driver::execute(&folder, &exe, &todo, usize::from(a.jobs), a.record, &|line| {
+        out!("{line}")
+    });
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
     Ok(ExitCode::SUCCESS)
 }
@@ -810,8 +900,8 @@ fn sweep_view(dir: &Path) -> Result<ExitCode> {
 }
 
 /// `mpmlab sweep-run`: one run, its result row to `result`.
-fn sweep_run(scene: &Path, result: &Path) -> Result<ExitCode> {
-    let r = mpmlab::sweep::run_file(scene);
+fn sweep_run(scene: &Path, result: &Path, record: Option<&Path>) -> Result<ExitCode> {
+    let r = mpmlab::sweep::run_file_recorded(scene, record);
     if let Some(dir) = result.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
@@ -881,6 +971,7 @@ fn tui(
     record: Option<PathBuf>,
     no_record: bool,
     force: bool,
+    cadence: &RecordArgs,
     limits: &Limits,
 ) -> Result<ExitCode> {
     if let Some(r) = &record {
@@ -926,7 +1017,14 @@ fn tui(
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         }
-        match Recorder::create(&path, &text, &sim, false) {
+        let settings = match cadence.settings(&sim) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(2));
+            }
+        };
+        match Recorder::create_with(&path, &text, &sim, false, settings) {
             Ok(r) => Some(r),
             Err(e) => {
                 eprintln!("error: {e}");

@@ -211,3 +211,60 @@ fn a_failed_run_leaves_a_readable_recording() {
     let _ = std::fs::remove_file(&rrd);
     let _ = std::fs::remove_file(&scene);
 }
+
+#[test]
+fn record_cadence_flags_and_the_size_report() {
+    // Points every 4 of 10 steps: 0, 4, 8 and the last; the end of the run
+    // reports the recording's size per step and per point.
+    let dir = temp_path("cli-cadence", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("short.toml");
+    let text = std::fs::read_to_string("scenarios/ghost-collision-elastic.toml")
+        .unwrap()
+        .replace("duration = 3.5", "duration = 0.035")
+        .replace("load_steps = 1000", "load_steps = 10");
+    std::fs::write(&scene, text).unwrap();
+    let rrd = dir.join("short.rrd");
+    let (s, r) = (scene.to_str().unwrap(), rrd.to_str().unwrap());
+    let (code, out, err) = mpmlab(&[
+        "run",
+        s,
+        "--quiet",
+        "--record",
+        r,
+        "--record-every",
+        "4",
+        "--record-fields",
+        "speed,sigma_xx",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("recording size:"))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(
+        line.contains("10 steps") && line.contains("points at 4 of them") && line.contains("B per point"),
+        "{line}"
+    );
+    // A time cadence is for explicit dynamics only; the flags need --record.
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--record",
+        r,
+        "--record-dt",
+        "0.1",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--record-dt") && err.contains("explicit-dynamics"),
+        "{err}"
+    );
+    let (code, _, err) = mpmlab(&["run", s, "--record-every", "2"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("need --record"), "{err}");
+    let (code, _, err) = mpmlab(&["run", s, "--record", r, "--record-fields", "colour"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown field `colour`"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1282,6 +1282,76 @@ fn cases() -> Vec<Case> {
         "more than the 1000 supported",
         "material[1000]",
     );
+    // --- [record]: the cadence and the fields, located.
+    let rec = |body: &str| format!("[record]\n{body}\n\n[analysis]");
+    for (name, base, body, fragment, field) in [
+        (
+            "record-every-zero",
+            "patch-compression",
+            "every = 0",
+            "between 1 and",
+            "record.every",
+        ),
+        (
+            "record-every-negative",
+            "patch-compression",
+            "every = -3",
+            "",
+            "record.every",
+        ),
+        (
+            "record-dt-quasi-static",
+            "patch-compression",
+            "dt = 0.1",
+            "explicit-dynamics",
+            "record.dt",
+        ),
+        (
+            "record-dt-negative",
+            "ghost-collision-elastic",
+            "dt = -0.5",
+            "positive",
+            "record.dt",
+        ),
+        (
+            "record-dt-nan",
+            "ghost-collision-elastic",
+            "dt = nan",
+            "finite",
+            "record.dt",
+        ),
+        (
+            "record-every-and-dt",
+            "ghost-collision-elastic",
+            "every = 2\ndt = 0.1",
+            "not both",
+            "record.dt",
+        ),
+        (
+            "record-unknown-field",
+            "patch-compression",
+            "fields = [\"sigma_yy\", \"colour\"]",
+            "unknown field `colour`",
+            "record.fields",
+        ),
+        (
+            "record-fields-number",
+            "patch-compression",
+            "fields = 3",
+            "",
+            "record.fields",
+        ),
+        (
+            "record-unknown-key",
+            "patch-compression",
+            "evry = 2",
+            "unknown field",
+            "record.evry",
+        ),
+    ] {
+        c.scene(name, base, &[("[analysis]", &rec(body))], fragment, field);
+    }
+
     let loads: String = (0..10_001)
         .map(|_| "[[loads.point]]\nat = [1.0, 1.0]\nforce = [0.0, -1.0]\n".to_string())
         .collect();

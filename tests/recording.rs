@@ -305,3 +305,213 @@ fn every_entity_family_is_recorded() {
         assert!(e.contains(f), "collision: missing {f} in {e:?}");
     }
 }
+
+/// What `/points` holds in a recording: the steps with positions and the
+/// names of its components.
+fn points_of(chunks: &[rerun::log::Chunk]) -> (std::collections::BTreeSet<i64>, std::collections::BTreeSet<String>) {
+    let positions = rerun::Points2D::descriptor_positions().component;
+    let step_tl: rerun::TimelineName = "step".into();
+    let (mut steps, mut components) = (std::collections::BTreeSet::new(), std::collections::BTreeSet::new());
+    for c in chunks.iter().filter(|c| c.entity_path().to_string() == "/points") {
+        for (t, _) in c.iter_component_indices(step_tl, positions) {
+            steps.insert(t.as_i64());
+        }
+        components.extend(c.components_identifiers().map(|i| i.to_string()));
+    }
+    (steps, components)
+}
+
+/// The steps at which `entity` holds a scalar.
+fn scalar_steps(chunks: &[rerun::log::Chunk], entity: &str) -> Vec<i64> {
+    let scalars = rerun::Scalars::descriptor_scalars().component;
+    let step_tl: rerun::TimelineName = "step".into();
+    let mut s: Vec<i64> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == entity)
+        .flat_map(|c| {
+            c.iter_component_indices(step_tl, scalars)
+                .map(|(t, _)| t.as_i64())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    s.sort();
+    s
+}
+
+/// A short collision (10 steps of 3.5 ms) with `edit` applied, recorded to
+/// the end (or its first failure); the chunks and the simulation.
+fn record_collision(
+    stem: &str,
+    edit: impl FnOnce(&mut mpmlab::scene::Scene),
+) -> (Vec<rerun::log::Chunk>, mpmlab::Simulation, Option<usize>) {
+    let mut sim = sim_with("ghost-collision-elastic", |s| {
+        s.analysis.load_steps = 10;
+        s.analysis.duration = Some(0.035);
+        s.analysis.condition_every = 0;
+        edit(s);
+    });
+    let text = std::fs::read_to_string(common::scene_path("ghost-collision-elastic")).unwrap();
+    let path = temp_path(stem, "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    let mut failed = None;
+    while !sim.finished() {
+        let s = mpmlab::runner::step(&mut sim, &mut [&mut rec]);
+        assert!(s.detached.is_empty(), "{:?}", s.detached);
+        if let Err(f) = s.result {
+            failed = Some(f.step());
+            break;
+        }
+    }
+    let size = rec.finish().unwrap();
+    assert_eq!(size.bytes, std::fs::metadata(&path).unwrap().len());
+    let chunks = read_chunks(&path);
+    let _ = std::fs::remove_file(&path);
+    (chunks, sim, failed)
+}
+
+#[test]
+fn points_follow_the_cadence_and_metrics_every_step() {
+    // every = 3 over 10 steps: points at the first state, steps 3, 6, 9 and
+    // the last; the energies at every step.
+    let (chunks, _, failed) = record_collision("rec-every", |s| s.record.every = Some(3));
+    assert_eq!(failed, None);
+    let (steps, _) = points_of(&chunks);
+    assert_eq!(steps.into_iter().collect::<Vec<_>>(), [0, 3, 6, 9, 10]);
+    assert_eq!(
+        scalar_steps(&chunks, "/metrics/energy/kinetic"),
+        (1..=10).collect::<Vec<_>>()
+    );
+    // The active cells go with the points.
+    let active = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/grid/active")
+        .map(|c| c.num_rows())
+        .sum::<usize>();
+    assert_eq!(active, 5);
+}
+
+#[test]
+fn points_follow_a_cadence_in_simulated_time() {
+    // Steps of 3.5 ms, points every 10 ms: the first step past 10, 20 and
+    // 30 ms (3, 6, 9), the first state and the last.
+    let (chunks, _, _) = record_collision("rec-dt", |s| s.record.dt = Some(0.01));
+    let (steps, _) = points_of(&chunks);
+    assert_eq!(steps.into_iter().collect::<Vec<_>>(), [0, 3, 6, 9, 10]);
+}
+
+#[test]
+fn a_failed_step_holds_the_points_it_started_from() {
+    // Both ghosts fly to the lower left at 10 m/s (3.5 cm a step) and leave
+    // the grid a few steps in; the cadence would hold only the first and
+    // last states, yet the state before the failure is there, with the
+    // error event at the failed step.
+    let (chunks, _, failed) = record_collision("rec-failed", |s| {
+        s.record.every = Some(100);
+        for b in &mut s.bodies {
+            b.velocity = [-10.0, -10.0];
+        }
+    });
+    let k = failed.expect("the ghosts leave the grid") as i64;
+    assert!(k >= 2, "failed at step {k}");
+    let (steps, _) = points_of(&chunks);
+    assert_eq!(steps.into_iter().collect::<Vec<_>>(), [0, k - 1]);
+    let step_tl: rerun::TimelineName = "step".into();
+    let text = rerun::TextLog::descriptor_text().component;
+    let errors: Vec<i64> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| {
+            c.iter_component_indices(step_tl, text)
+                .map(|(t, _)| t.as_i64())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(errors.contains(&k), "no event at step {k}: {errors:?}");
+}
+
+#[test]
+fn only_the_asked_fields_are_recorded() {
+    use mpmlab::field::Field;
+    use mpmlab::scene::FieldNames;
+    let positions = rerun::Points2D::descriptor_positions().component.to_string();
+    let keys: Vec<&str> = Field::ALL.iter().map(|f| f.key()).collect();
+    // One field: speed, with the positions, colours and radii.
+    let (chunks, sim, _) = record_collision("rec-speed", |s| {
+        s.record.fields = Some(FieldNames::Many(vec!["speed".into()]));
+    });
+    let (_, components) = points_of(&chunks);
+    assert!(components.contains(&positions), "{components:?}");
+    for k in &keys {
+        assert_eq!(components.contains(*k), *k == "speed", "{k}: {components:?}");
+    }
+    let speed: rerun::ComponentIdentifier = "speed".into();
+    let last: Vec<f64> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/points")
+        .flat_map(|c| c.iter_slices::<f64>(speed).map(|v| v.to_vec()).collect::<Vec<_>>())
+        .last()
+        .unwrap();
+    assert_eq!(last, Field::Speed.values(&sim));
+    // The recording says which fields it holds.
+    let text = rerun::TextLog::descriptor_text().component;
+    let said: Vec<String> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/recording/fields")
+        .flat_map(|c| {
+            c.iter_slices::<String>(text)
+                .flat_map(|v| v.to_vec())
+                .collect::<Vec<_>>()
+        })
+        .map(|s| s.to_string())
+        .collect();
+    assert_eq!(said, ["speed"]);
+
+    // Positions only.
+    let (chunks, _, _) = record_collision("rec-positions", |s| {
+        s.record.fields = Some(FieldNames::Many(vec!["positions".into()]));
+    });
+    let (steps, components) = points_of(&chunks);
+    assert_eq!(steps.len(), 11);
+    assert!(components.contains(&positions));
+    assert!(keys.iter().all(|k| !components.contains(*k)), "{components:?}");
+
+    // Every field, at every step: what recordings held before cadences.
+    let (chunks, sim, _) = record_collision("rec-all", |s| {
+        s.record.every = Some(1);
+        s.record.fields = Some(FieldNames::One("all".into()));
+    });
+    let (steps, components) = points_of(&chunks);
+    assert_eq!(steps.len(), 11);
+    for f in Field::ALL {
+        assert!(components.contains(f.key()), "{}: {components:?}", f.key());
+        let id: rerun::ComponentIdentifier = f.key().into();
+        let last: Vec<f64> = chunks
+            .iter()
+            .filter(|c| c.entity_path().to_string() == "/points")
+            .flat_map(|c| c.iter_slices::<f64>(id).map(|v| v.to_vec()).collect::<Vec<_>>())
+            .last()
+            .unwrap();
+        assert_eq!(last, f.values(&sim), "{}", f.key());
+    }
+}
+
+#[test]
+fn a_recording_with_a_cadence_keeps_the_layout() {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::LogMsg;
+    let sim = sim_with("ghost-collision-elastic", |s| s.record.every = Some(50));
+    let text = std::fs::read_to_string(common::scene_path("ghost-collision-elastic")).unwrap();
+    let path = temp_path("rec-layout-cadence", "rrd");
+    Recorder::create(&path, &text, &sim, true).unwrap().finish().unwrap();
+    let file = std::fs::File::open(&path).unwrap();
+    let (mut blueprint, mut activated) = (0, false);
+    for msg in DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap() {
+        match msg.unwrap() {
+            LogMsg::ArrowMsg(store, _) if !store.is_recording() => blueprint += 1,
+            LogMsg::BlueprintActivationCommand(c) => activated |= c.make_active,
+            _ => {}
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    assert!(activated && blueprint > 5, "{blueprint} blueprint chunks");
+}

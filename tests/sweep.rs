@@ -253,3 +253,42 @@ fn an_edited_scene_reruns_and_values_keep_their_spaces_out() {
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_file(&base);
 }
+
+#[test]
+fn recorded_sweep_reports_recording_sizes() {
+    // `--record`: each run writes recordings/<id>.rrd and its row holds the
+    // recording's size, per step and per point; the cadence is a setting.
+    let dir: PathBuf = temp_path("sweep-record", "d");
+    let (code, out, err) = mpmlab(&[
+        "sweep",
+        "scenarios/column-small-strain.toml",
+        "--vary",
+        "h=1.0,0.5",
+        "--vary",
+        "record.every=1",
+        "--record",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let rows = table(&dir);
+    assert_eq!(rows.len(), 2, "{out}");
+    for r in &rows {
+        assert!(r.completed, "{r:?}");
+        let rrd = dir.join("recordings").join(format!("{}.rrd", r.id));
+        let bytes = std::fs::metadata(&rrd).unwrap().len();
+        assert_eq!(r.record_bytes, bytes, "{r:?}");
+        assert!((r.record_bytes_per_step - bytes as f64 / r.steps_total as f64).abs() < 1e-6 * bytes as f64);
+        assert!(r.record_bytes_per_point > 0.0, "{r:?}");
+    }
+    let header = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
+    assert!(
+        header
+            .lines()
+            .next()
+            .unwrap()
+            .contains(",condition,record_bytes,record_bytes_per_step,record_bytes_per_point,error:"),
+        "{header}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -8,6 +8,7 @@ mod exact;
 mod ibm;
 mod limits;
 mod materials;
+pub mod record;
 
 use boundaries::build_boundary;
 use exact::build_exact;
@@ -87,6 +88,8 @@ pub struct Model {
     pub ibm: Vec<IbmBoundary>,
     pub analysis: AnalysisSpec,
     pub exact: Option<ExactSolution>,
+    /// What a recording of a run holds (`[record]`).
+    pub record: record::RecordSettings,
 }
 
 /// Largest grid the engine will build (cells).
@@ -294,6 +297,7 @@ impl Model {
             return Err(FieldError::new("analysis.delta_over_h", "must lie in (0, 1]"));
         }
         let ibm = ibm::build(scene, &grid, &a, &boundaries, &points, &regions, exact.as_ref())?;
+        let record = record::build(&scene.record, a.kind)?;
 
         Ok(Model {
             name: scene.scene.name.clone(),
@@ -309,6 +313,7 @@ impl Model {
             ibm,
             analysis: a,
             exact,
+            record,
         })
     }
 }

@@ -8,16 +8,18 @@
 //! |---|---|---|
 //! | `scene` | TextDocument (the scene file) | static |
 //! | `grid` | LineStrips2D | static |
-//! | `grid/active` | LineStrips2D (outlines of cells holding points) | every step |
-//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of every field (`sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | every step |
-//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | every step |
-//! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | every step |
+//! | `recording` | TextDocument (the cadence and the per-point fields) | static |
+//! | `recording/fields` | TextLog (the per-point fields, comma-separated) | static |
+//! | `grid/active` | LineStrips2D (outlines of cells holding points) | frames |
+//! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of the recorded fields (of `sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | frames |
+//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | frames |
+//! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | frames |
 //! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,violation_rms,cut_cells}` | Scalars | every step |
-//! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | every step |
+//! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | frames |
 //! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
 //! | `metrics/newton/iterations`, `metrics/ghost/faces`, `metrics/energy/plastic_dissipation` | Scalars | every step |
-//! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | every step |
-//! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | every step |
+//! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | frames |
+//! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | frames |
 //! | `metrics/boundary/<name>/{length,area,cells_cut,resultant_x,resultant_y}` | Scalars | every step |
 //! | `metrics/residual` | Scalars, on `iteration` | every iteration |
 //! | `metrics/condition/stiffness` | Scalars | every step |
@@ -31,6 +33,14 @@
 //! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, failures, end) | as they happen |
 //!
+//! "Frames" are the steps the cadence picks ([`crate::model::record`]:
+//! scene `[record]`, or the command line's `--record-every`,
+//! `--record-dt`, `--record-fields`), plus the initial state, the last
+//! step, the state before a failed step and the state a run stops on; at
+//! cadence 1 with every field a recording holds what it held before
+//! cadences existed. The step timeline shows which steps hold points (the
+//! `points` entity is logged at those steps only).
+//!
 //! The file also holds a blueprint (rerun's stored layout, [`layout`]) so
 //! the viewer opens on the scene with the metrics beside it.
 //!
@@ -40,9 +50,13 @@ pub mod sweep;
 
 use crate::colormap;
 use crate::field::Field;
+use crate::model::record::{Plan, RecordSettings};
 use crate::simulation::{Simulation, StepFailure, StepReport};
 use rerun::{RecordingStream, RecordingStreamBuilder};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, Receiver, SyncSender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
 
 /// Why a recording could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -54,10 +68,10 @@ pub enum RecordError {
 }
 
 /// Outline of cell `c` as a closed strip.
-fn cell_box(g: &crate::grid::Grid, c: usize) -> Vec<[f32; 2]> {
+fn cell_box(g: &crate::grid::Grid, c: usize) -> [[f32; 2]; 5] {
     let m = g.cell_min(c % g.nx, c / g.nx);
     let (x0, y0, x1, y1) = (m[0] as f32, m[1] as f32, (m[0] + g.h) as f32, (m[1] + g.h) as f32);
-    vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+    [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
 }
 
 /// The viewer's default layout (a blueprint stored in the file): the 2D
@@ -90,12 +104,222 @@ fn layout(dynamic: bool) -> rerun::blueprint::Blueprint {
     Blueprint::new(Horizontal::new([scene.into(), Vertical::new(right).into()]).with_column_shares([0.55, 0.45]))
 }
 
+/// The bulky part of a point frame: copied from the simulation on the
+/// engine's thread into reused buffers (plain copies, no rerun types) and
+/// turned into rerun data on the recorder's own thread, so that a step
+/// waits for the copies only.
+#[derive(Default)]
+struct Frame {
+    step: i64,
+    time: Option<f64>,
+    positions: Vec<[f32; 2]>,
+    radii: Vec<f32>,
+    /// The values the points are coloured by.
+    colour: Vec<f64>,
+    /// The recorded fields' values per point.
+    fields: Vec<(&'static str, Vec<f64>)>,
+    /// Cells holding points.
+    cells: Vec<usize>,
+    ghost: Vec<[[f32; 2]; 2]>,
+}
+
+impl Frame {
+    fn fill(&mut self, sim: &Simulation, colour: Field, fields: &[Field]) {
+        self.step = sim.step_index() as i64;
+        self.time = sim.time();
+        let pts = sim.points();
+        self.positions.clear();
+        self.positions.extend(pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]));
+        self.radii.clear();
+        self.radii
+            .extend(pts.vol.iter().map(|v| (0.5 * v.max(0.0).sqrt()) as f32));
+        self.colour = colour.values(sim);
+        self.fields.clear();
+        self.fields.extend(fields.iter().map(|f| {
+            let v = if *f == colour {
+                self.colour.clone()
+            } else {
+                f.values(sim)
+            };
+            (f.key(), v)
+        }));
+        self.cells.clear();
+        self.cells.extend_from_slice(sim.active_cells());
+        self.ghost.clear();
+        self.ghost.extend(
+            sim.ghost_faces()
+                .iter()
+                .map(|(a, b)| [[a[0] as f32, a[1] as f32], [b[0] as f32, b[1] as f32]]),
+        );
+    }
+}
+
+/// The recorder's thread: logs the frames it is sent, returns their
+/// buffers, and keeps the first error for the engine's side to report.
+struct FrameWriter {
+    frames: Option<SyncSender<Frame>>,
+    spare: Receiver<Frame>,
+    thread: Option<JoinHandle<()>>,
+    error: Arc<Mutex<Option<String>>>,
+}
+
+impl FrameWriter {
+    fn start(rec: RecordingStream, grid: crate::grid::Grid) -> FrameWriter {
+        // Two frames in flight at most: a slow disk slows the run down
+        // instead of filling the memory.
+        let (tx, rx) = mpsc::sync_channel::<Frame>(1);
+        let (spare_tx, spare) = mpsc::channel();
+        let error = Arc::new(Mutex::new(None));
+        let err = error.clone();
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || {
+                let mut colors = Vec::new();
+                for f in rx {
+                    let failed = err.lock().map_or(true, |e| e.is_some());
+                    if !failed {
+                        if let Err(e) = write_frame(&rec, &grid, &f, &mut colors) {
+                            if let Ok(mut slot) = err.lock() {
+                                *slot = Some(e.to_string());
+                            }
+                        }
+                    }
+                    let _ = spare_tx.send(f);
+                }
+            })
+            .ok();
+        FrameWriter {
+            frames: Some(tx),
+            spare,
+            thread,
+            error,
+        }
+    }
+
+    fn error(&self) -> Option<String> {
+        self.error.lock().ok().and_then(|e| e.clone())
+    }
+
+    /// Wait for every frame sent to be logged.
+    fn join(&mut self) -> Option<String> {
+        self.frames = None;
+        if let Some(t) = self.thread.take() {
+            if t.join().is_err() {
+                return Some("the recorder's thread panicked".into());
+            }
+        }
+        self.error()
+    }
+}
+
+/// Log one frame: the points with colours, radii and the recorded fields,
+/// the active cells and the ghost faces.
+fn write_frame(
+    rec: &RecordingStream,
+    g: &crate::grid::Grid,
+    f: &Frame,
+    colors: &mut Vec<rerun::Color>,
+) -> Result<(), rerun::RecordingStreamError> {
+    rec.set_time_sequence("step", f.step);
+    if let Some(t) = f.time {
+        rec.set_duration_secs("time", t);
+    }
+    let (lo, hi) = colormap::range(f.colour.iter().copied());
+    colors.clear();
+    colors.extend(f.colour.iter().map(|&v| {
+        let [r, g, b] = colormap::viridis(colormap::unit(v, lo, hi));
+        rerun::Color::from_rgb(r, g, b)
+    }));
+    rec.log(
+        "points",
+        &rerun::Points2D::new(f.positions.iter().copied())
+            .with_colors(colors.iter().copied())
+            .with_radii(f.radii.iter().copied()),
+    )?;
+    // The recorded fields' values per point, shown when a point is hovered.
+    if !f.fields.is_empty() {
+        let mut values = rerun::external::re_sdk_types::AnyValues::default();
+        for (key, v) in &f.fields {
+            values = values.with_component::<rerun::components::Scalar>(*key, v.iter().copied());
+        }
+        rec.log("points", &values)?;
+    }
+    rec.log(
+        "grid/active",
+        &rerun::LineStrips2D::new(f.cells.iter().map(|&c| cell_box(g, c)))
+            .with_colors([rerun::Color::from_rgb(60, 120, 200)]),
+    )?;
+    rec.log(
+        "grid/ghost_faces",
+        &rerun::LineStrips2D::new(f.ghost.iter().copied()).with_colors([rerun::Color::from_rgb(240, 140, 20)]),
+    )?;
+    rec.reset_time();
+    Ok(())
+}
+
+/// What a finished recording holds and its size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordingSize {
+    pub bytes: u64,
+    /// Steps with metrics (the initial state not counted).
+    pub steps: usize,
+    /// Steps holding points (the initial state counted).
+    pub frames: usize,
+    pub points: usize,
+}
+
+impl RecordingSize {
+    pub fn bytes_per_step(&self) -> f64 {
+        self.bytes as f64 / self.steps.max(1) as f64
+    }
+
+    /// Bytes per point per step holding points (metrics included).
+    pub fn bytes_per_point_frame(&self) -> f64 {
+        self.bytes as f64 / (self.frames.max(1) * self.points.max(1)) as f64
+    }
+}
+
+impl std::fmt::Display for RecordingSize {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}, {} steps ({}/step), points at {} of them ({:.1} B per point per frame)",
+            human_bytes(self.bytes as f64),
+            self.steps,
+            human_bytes(self.bytes_per_step()),
+            self.frames,
+            self.bytes_per_point_frame()
+        )
+    }
+}
+
+/// `12.3 MB`, `45.6 kB`, `789 B`.
+pub fn human_bytes(b: f64) -> String {
+    if b >= 1e9 {
+        format!("{:.2} GB", b / 1e9)
+    } else if b >= 1e6 {
+        format!("{:.1} MB", b / 1e6)
+    } else if b >= 1e3 {
+        format!("{:.1} kB", b / 1e3)
+    } else {
+        format!("{b:.0} B")
+    }
+}
+
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
     path: PathBuf,
     iteration: i64,
     field: Field,
+    settings: RecordSettings,
+    plan: Plan,
+    writer: FrameWriter,
+    /// The step of the last frame sent (points are sent once per step).
+    last_frame: Option<i64>,
+    points: usize,
+    frames: std::collections::BTreeSet<i64>,
+    steps: std::collections::BTreeSet<i64>,
 }
 
 /// The rerun version the recordings are written with; viewers read their
@@ -107,13 +331,25 @@ pub const APP_ID: &str = "mpmlab";
 
 impl Recorder {
     /// Create the file and log the static parts (scene text, grid) and the
-    /// initial state. With `deterministic`, the recording id is fixed and
-    /// no wall-clock timeline is added (for tests).
+    /// initial state, with the scene's `[record]` settings. With
+    /// `deterministic`, the recording id is fixed and no wall-clock
+    /// timeline is added (for tests).
     pub fn create(
         path: &Path,
         scene_text: &str,
         sim: &Simulation,
         deterministic: bool,
+    ) -> Result<Recorder, RecordError> {
+        Self::create_with(path, scene_text, sim, deterministic, sim.model().record.clone())
+    }
+
+    /// [`Recorder::create`] with other settings (the command line's).
+    pub fn create_with(
+        path: &Path,
+        scene_text: &str,
+        sim: &Simulation,
+        deterministic: bool,
+        settings: RecordSettings,
     ) -> Result<Recorder, RecordError> {
         let err = |m: String| RecordError::Create {
             path: path.to_path_buf(),
@@ -127,7 +363,17 @@ impl Recorder {
         // Fail early and clearly on an unwritable path (the file sink would
         // only report it from its writer thread).
         std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
-        let mut builder = RecordingStreamBuilder::new(APP_ID);
+        // Metrics arrive a few dozen scalars a step: batched over a second
+        // (rerun's default for files is 200 ms), a chunk holds many steps
+        // instead of one, which keeps the per-chunk overhead (about a
+        // kilobyte) from dominating a long run's file. At most 16 MiB
+        // (a few point frames of a large run) wait in the batcher.
+        let batching = rerun::log::ChunkBatcherConfig {
+            flush_tick: std::time::Duration::from_secs(1),
+            flush_num_bytes: 16 * 1024 * 1024,
+            ..rerun::log::ChunkBatcherConfig::DEFAULT
+        };
+        let mut builder = RecordingStreamBuilder::new(APP_ID).batcher_config(batching);
         if deterministic {
             builder = builder.recording_id("mpmlab-test");
         }
@@ -135,21 +381,33 @@ impl Recorder {
         if deterministic {
             rec.set_log_time_enabled(false);
         }
-        let r = Recorder {
+        let a = &sim.model().analysis;
+        let step_dt = a.duration.map(|d| d / a.load_steps as f64);
+        let plan = Plan::new(settings.cadence, sim.load_steps(), sim.points().len(), step_dt);
+        let writer = FrameWriter::start(rec.clone(), sim.model().grid.clone());
+        let mut r = Recorder {
             rec,
             path: path.to_path_buf(),
             iteration: 0,
             field: Field::SigmaYy,
+            settings,
+            plan,
+            writer,
+            last_frame: None,
+            points: sim.points().len(),
+            frames: Default::default(),
+            steps: Default::default(),
         };
         r.check(layout(sim.time().is_some()).send(&r.rec, rerun::blueprint::BlueprintActivation::default()))?;
         r.log_static(scene_text, sim)?;
         r.log_state(sim)?;
         r.event(
             &format!(
-                "start: scene `{}`, {} points, {} load steps",
+                "start: scene `{}`, {} points, {} load steps; points recorded {}",
                 sim.model().name,
                 sim.points().len(),
-                sim.load_steps()
+                sim.load_steps(),
+                r.cadence()
             ),
             rerun::TextLogLevel::INFO,
         )?;
@@ -158,6 +416,27 @@ impl Recorder {
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The cadence and fields in words (`every 3 steps; fields sigma_yy`).
+    pub fn cadence(&self) -> String {
+        let fields: Vec<&str> = self.settings.fields.iter().map(|f| f.key()).collect();
+        format!(
+            "{} and at the first and last step; fields: positions{}{}",
+            self.plan.describe(),
+            if fields.is_empty() { "" } else { ", " },
+            fields.join(", ")
+        )
+    }
+
+    /// The points' cadence in words (`every 3 steps`).
+    pub fn points_cadence(&self) -> String {
+        self.plan.describe()
+    }
+
+    /// Whether step `k` holds points under the cadence.
+    pub fn holds_points(&self, k: usize) -> bool {
+        self.plan.holds_points(k)
     }
 
     fn check<T, E: std::fmt::Display>(&self, r: Result<T, E>) -> Result<T, RecordError> {
@@ -173,6 +452,21 @@ impl Recorder {
             "scene",
             &rerun::TextDocument::new(doc).with_media_type(rerun::MediaType::markdown()),
         ))?;
+        // What the recording holds: the cadence and the per-point fields.
+        let fields: Vec<&str> = self.settings.fields.iter().map(|f| f.key()).collect();
+        self.check(self.rec.log_static(
+            "recording",
+            &rerun::TextDocument::new(format!(
+                "Points (positions, colours by {}, radii) {}.\n\nPer-point fields: {}.\n\nMetrics and events: every step.",
+                self.field.key(),
+                self.cadence(),
+                if fields.is_empty() { "none".to_string() } else { fields.join(", ") }
+            )),
+        ))?;
+        self.check(
+            self.rec
+                .log_static("recording/fields", &rerun::TextLog::new(fields.join(","))),
+        )?;
         let g = &sim.model().grid;
         let max = g.max();
         let mut strips = Vec::new();
@@ -194,56 +488,47 @@ impl Recorder {
         )
     }
 
-    /// Log the points and active cells at the simulation's current step.
-    pub fn log_state(&self, sim: &Simulation) -> Result<(), RecordError> {
-        self.rec.set_time_sequence("step", sim.step_index() as i64);
+    /// Log the points (with the recorded fields), the active cells and the
+    /// boundaries at the simulation's current step, whatever the cadence
+    /// (once per step: a second call at the same step does nothing).
+    pub fn log_state(&mut self, sim: &Simulation) -> Result<(), RecordError> {
+        if let Some(e) = self.writer.error() {
+            return Err(RecordError::Write {
+                path: self.path.clone(),
+                message: e,
+            });
+        }
+        let step = sim.step_index() as i64;
+        if self.last_frame == Some(step) {
+            return Ok(());
+        }
+        self.last_frame = Some(step);
+        self.frames.insert(step);
+        let mut frame = self.writer.spare.try_recv().unwrap_or_default();
+        frame.fill(sim, self.field, &self.settings.fields);
+        if let Some(tx) = &self.writer.frames {
+            if tx.send(frame).is_err() {
+                return Err(RecordError::Write {
+                    path: self.path.clone(),
+                    message: self
+                        .writer
+                        .error()
+                        .unwrap_or_else(|| "the recorder's thread stopped".into()),
+                });
+            }
+        }
+        self.rec.set_time_sequence("step", step);
         if let Some(t) = sim.time() {
             self.rec.set_duration_secs("time", t);
         }
-        let pts = sim.points();
-        let values = self.field.values(sim);
-        let (lo, hi) = colormap::range(values.iter().copied());
-        let colors: Vec<rerun::Color> = values
-            .iter()
-            .map(|&v| {
-                let [r, g, b] = colormap::viridis(colormap::unit(v, lo, hi));
-                rerun::Color::from_rgb(r, g, b)
-            })
-            .collect();
-        let positions: Vec<[f32; 2]> = pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]).collect();
-        let radii: Vec<f32> = pts.vol.iter().map(|v| (0.5 * v.max(0.0).sqrt()) as f32).collect();
-        self.check(self.rec.log(
-            "points",
-            &rerun::Points2D::new(positions).with_colors(colors).with_radii(radii),
-        ))?;
-        // Every field's value per point, shown when a point is hovered.
-        let mut values = rerun::external::re_sdk_types::AnyValues::default();
-        for f in Field::ALL {
-            values = values.with_component::<rerun::components::Scalar>(f.key(), f.values(sim));
-        }
-        self.check(self.rec.log("points", &values))?;
         let g = &sim.model().grid;
-        let boxes: Vec<Vec<[f32; 2]>> = sim.active_cells().iter().map(|&c| cell_box(g, c)).collect();
-        self.check(self.rec.log(
-            "grid/active",
-            &rerun::LineStrips2D::new(boxes).with_colors([rerun::Color::from_rgb(60, 120, 200)]),
-        ))?;
-        let ghost: Vec<Vec<[f32; 2]>> = sim
-            .ghost_faces()
-            .iter()
-            .map(|(a, b)| vec![[a[0] as f32, a[1] as f32], [b[0] as f32, b[1] as f32]])
-            .collect();
-        self.check(self.rec.log(
-            "grid/ghost_faces",
-            &rerun::LineStrips2D::new(ghost).with_colors([rerun::Color::from_rgb(240, 140, 20)]),
-        ))?;
         for b in &sim.ibm_boundaries() {
             let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
             self.check(self.rec.log(
                 format!("ibm/{}/line", b.name),
                 &rerun::LineStrips2D::new([line]).with_colors([rerun::Color::from_rgb(40, 200, 220)]),
             ))?;
-            let cut: Vec<Vec<[f32; 2]>> = b.cut_cells(g).iter().map(|&c| cell_box(g, c)).collect();
+            let cut: Vec<[[f32; 2]; 5]> = b.cut_cells(g).iter().map(|&c| cell_box(g, c)).collect();
             self.check(self.rec.log(
                 format!("ibm/{}/cut_cells", b.name),
                 &rerun::LineStrips2D::new(cut).with_colors([rerun::Color::from_rgb(0, 110, 120)]),
@@ -272,6 +557,12 @@ impl Recorder {
             ))?;
         }
         Ok(())
+    }
+
+    /// Log the current state if the cadence left it out: the last state
+    /// of a run that stops early or fails.
+    pub fn log_final_state(&mut self, sim: &Simulation) -> Result<(), RecordError> {
+        self.log_state(sim)
     }
 
     fn scalar(&self, path: &str, v: f64) -> Result<(), RecordError> {
@@ -332,7 +623,13 @@ impl Recorder {
             self.scalar(&format!("{base}/resultant_x"), b.resultant[0])?;
             self.scalar(&format!("{base}/resultant_y"), b.resultant[1])?;
         }
-        self.log_state(sim)
+        self.steps.insert(report.step as i64);
+        // A new state (a redo in the TUI may repeat a step number).
+        self.last_frame = None;
+        if self.plan.holds_points(report.step) {
+            self.log_state(sim)?;
+        }
+        Ok(())
     }
 
     /// Explicit dynamics: energies, balance, momentum and (on condition
@@ -389,11 +686,14 @@ impl Recorder {
         Ok(())
     }
 
-    /// Log a failed step: its residual history and an error event.
-    pub fn log_failure(&mut self, failure: &StepFailure) -> Result<(), RecordError> {
+    /// Log a failed step: its residual history and an error event, and
+    /// the points of the state it started from (the last good one),
+    /// whatever the cadence.
+    pub fn log_failure(&mut self, failure: &StepFailure, sim: &Simulation) -> Result<(), RecordError> {
         self.log_residuals(failure.step(), failure.residuals())?;
         self.rec.set_time_sequence("step", failure.step() as i64);
-        self.event(&failure.to_string(), rerun::TextLogLevel::ERROR)
+        self.event(&failure.to_string(), rerun::TextLogLevel::ERROR)?;
+        self.log_state(sim)
     }
 
     /// Log a text event at the current step.
@@ -401,10 +701,29 @@ impl Recorder {
         self.check(self.rec.log("events", &rerun::TextLog::new(text).with_level(level)))
     }
 
-    /// Flush everything to disk and close the file.
-    pub fn finish(self) -> Result<(), RecordError> {
+    /// Flush everything to disk and close the file; its size and what it
+    /// holds.
+    pub fn finish(mut self) -> Result<RecordingSize, RecordError> {
+        let joined = self.writer.join();
+        if let Some(e) = joined {
+            return Err(RecordError::Write {
+                path: self.path.clone(),
+                message: e,
+            });
+        }
         let r = self.rec.flush_blocking();
-        self.check(r)
+        self.check(r)?;
+        let size = RecordingSize {
+            bytes: 0,
+            steps: self.steps.len(),
+            frames: self.frames.len(),
+            points: self.points,
+        };
+        let path = self.path.clone();
+        // The file sink writes its footer when the last handle goes.
+        drop(self);
+        let bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
+        Ok(RecordingSize { bytes, ..size })
     }
 }
 
@@ -416,8 +735,8 @@ impl crate::runner::Observer for Recorder {
             .err()
             .map(|e| format!("recording stopped: {e}"))
     }
-    fn failed(&mut self, _sim: &Simulation, failure: &StepFailure) -> Option<String> {
-        self.log_failure(failure)
+    fn failed(&mut self, sim: &Simulation, failure: &StepFailure) -> Option<String> {
+        self.log_failure(failure, sim)
             .err()
             .map(|e| format!("recording stopped: {e}"))
     }

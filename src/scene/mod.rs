@@ -41,6 +41,44 @@ pub struct Scene {
     pub analysis: AnalysisSpec,
     #[serde(default)]
     pub exact: Option<ExactSpec>,
+    #[serde(default)]
+    pub record: RecordSpec,
+}
+
+/// `[record]`: what the run's recording holds (checked in
+/// [`crate::model::record`]). Metrics and events are recorded at every
+/// step; the points at a cadence: every `every` steps or, for explicit
+/// dynamics, every `dt` seconds of simulated time (default: every step
+/// up to a budget of points times frames, see
+/// [`crate::model::record::POINT_FRAME_BUDGET`]).
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordSpec {
+    #[serde(default)]
+    pub every: Option<usize>,
+    #[serde(default)]
+    pub dt: Option<f64>,
+    /// Per-point fields recorded with the positions (`sigma_yy`, `speed`,
+    /// ...; `"all"` for every one; default the colour field `sigma_yy`).
+    #[serde(default)]
+    pub fields: Option<FieldNames>,
+}
+
+/// `fields = "all"` or `fields = ["sigma_yy", "speed"]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum FieldNames {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl FieldNames {
+    pub fn names(&self) -> Vec<String> {
+        match self {
+            FieldNames::One(s) => vec![s.clone()],
+            FieldNames::Many(v) => v.clone(),
+        }
+    }
 }
 
 /// `[scene]`: name and a one-paragraph description (shown by `mpmlab list`).

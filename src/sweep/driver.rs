@@ -56,13 +56,18 @@ pub fn pending(folder: &Folder, runs: &[Run]) -> Vec<Run> {
 
 /// The command that runs one run, with absolute paths so that it runs
 /// from any working directory.
-fn command_line(exe: &Path, folder: &Folder, id: &str) -> String {
+fn command_line(exe: &Path, folder: &Folder, id: &str, record: bool) -> String {
     let q = |p: &Path| {
         let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
         format!("'{}'", p.display().to_string().replace('\'', "'\\''"))
     };
+    let rec = if record {
+        format!(" --record {}", q(&folder.recording(id)))
+    } else {
+        String::new()
+    };
     format!(
-        "{} sweep-run {} --result {}",
+        "{} sweep-run {} --result {}{rec}",
         q(exe),
         q(&folder.run_scene(id)),
         q(&folder.result(id))
@@ -70,8 +75,12 @@ fn command_line(exe: &Path, folder: &Folder, id: &str) -> String {
 }
 
 /// Write `jobs.txt`: one shell command per pending run.
-pub fn emit_jobs(folder: &Folder, exe: &Path, runs: &[Run]) -> Result<std::path::PathBuf, String> {
-    let lines: Vec<String> = runs.iter().map(|r| command_line(exe, folder, &r.id)).collect();
+pub fn emit_jobs(folder: &Folder, exe: &Path, runs: &[Run], record: bool) -> Result<std::path::PathBuf, String> {
+    if record {
+        let d = folder.0.join("recordings");
+        std::fs::create_dir_all(&d).map_err(|e| io("cannot create", &d, e))?;
+    }
+    let lines: Vec<String> = runs.iter().map(|r| command_line(exe, folder, &r.id, record)).collect();
     let p = folder.0.join("jobs.txt");
     std::fs::write(&p, lines.join("\n") + if lines.is_empty() { "" } else { "\n" })
         .map_err(|e| io("cannot write", &p, e))?;
@@ -80,7 +89,18 @@ pub fn emit_jobs(folder: &Folder, exe: &Path, runs: &[Run]) -> Result<std::path:
 
 /// Run `runs` as child processes, `jobs` at a time; `progress` gets a line
 /// per finished run. A child that dies without a result gets a failed row.
-pub fn execute(folder: &Folder, exe: &Path, runs: &[Run], jobs: usize, progress: &(dyn Fn(String) + Sync)) {
+/// With `record`, each run writes its recording ([`Folder::recording`]).
+pub fn execute(
+    folder: &Folder,
+    exe: &Path,
+    runs: &[Run],
+    jobs: usize,
+    record: bool,
+    progress: &(dyn Fn(String) + Sync),
+) {
+    if record {
+        let _ = std::fs::create_dir_all(folder.0.join("recordings"));
+    }
     let next = AtomicUsize::new(0);
     let done = Mutex::new(0usize);
     std::thread::scope(|s| {
@@ -89,13 +109,15 @@ pub fn execute(folder: &Folder, exe: &Path, runs: &[Run], jobs: usize, progress:
                 let k = next.fetch_add(1, Ordering::SeqCst);
                 let Some(run) = runs.get(k) else { break };
                 let result = folder.result(&run.id);
-                let status = Command::new(exe)
-                    .arg("sweep-run")
+                let mut cmd = Command::new(exe);
+                cmd.arg("sweep-run")
                     .arg(folder.run_scene(&run.id))
                     .arg("--result")
-                    .arg(&result)
-                    .stdout(std::process::Stdio::null())
-                    .status();
+                    .arg(&result);
+                if record {
+                    cmd.arg("--record").arg(folder.recording(&run.id));
+                }
+                let status = cmd.stdout(std::process::Stdio::null()).status();
                 let r = match std::fs::read_to_string(&result)
                     .ok()
                     .and_then(|t| super::from_csv(&t).pop())

@@ -290,7 +290,15 @@ pub struct RunResult {
     pub condition: f64,
     /// Errors against the exact solution after the last completed step.
     pub errors: Vec<(String, f64)>,
+    /// The run's recording (`sweep --record`): bytes, bytes per step and
+    /// per point per step holding points (columns only when recorded).
+    pub record_bytes: u64,
+    pub record_bytes_per_step: f64,
+    pub record_bytes_per_point: f64,
 }
+
+/// The columns of a recorded run, after the errors.
+pub const RECORD_COLUMNS: [&str; 3] = ["record_bytes", "record_bytes_per_step", "record_bytes_per_point"];
 
 /// Peak resident set size of this process (kB), from `/proc/self/status`.
 fn peak_rss_kb() -> u64 {
@@ -307,6 +315,12 @@ fn peak_rss_kb() -> u64 {
 /// Run the scene file of one run in this process, to the end or the first
 /// failure.
 pub fn run_file(path: &Path) -> RunResult {
+    run_file_recorded(path, None)
+}
+
+/// [`run_file`], recorded to `record` (with the scene's `[record]`
+/// settings) when given; the row then holds the recording's size.
+pub fn run_file_recorded(path: &Path, record: Option<&Path>) -> RunResult {
     let text = std::fs::read_to_string(path).unwrap_or_default();
     let (id, settings) = read_header(&text);
     let mut r = RunResult {
@@ -328,9 +342,29 @@ pub fn run_file(path: &Path) -> RunResult {
     r.steps_total = sim.load_steps();
     let start = Instant::now();
     let never = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    if let RunEnd::Failed(f) = runner::run(&mut sim, &mut [&mut r], &never, &mut Vec::new()) {
+    let mut recorder = match record.map(|p| crate::record::Recorder::create(p, &text, &sim, false)) {
+        Some(Err(e)) => {
+            r.failure = format!("recording: {e}");
+            return r;
+        }
+        Some(Ok(rec)) => Some(rec),
+        None => None,
+    };
+    if let RunEnd::Failed(f) = runner::run(&mut sim, &mut [&mut r, &mut recorder], &never, &mut Vec::new()) {
         r.failed_step = f.step();
         r.failure = one_line(&f);
+    }
+    if let Some(mut rec) = recorder {
+        let _ = rec.log_final_state(&sim);
+        match rec.finish() {
+            Ok(size) => {
+                r.record_bytes = size.bytes;
+                r.record_bytes_per_step = size.bytes_per_step();
+                r.record_bytes_per_point = size.bytes_per_point_frame();
+            }
+            Err(e) if r.failure.is_empty() => r.failure = format!("recording: {e}"),
+            Err(_) => {}
+        }
     }
     r.wall_s = start.elapsed().as_secs_f64();
     r.completed = sim.finished() && r.failed_step == 0;
@@ -415,6 +449,16 @@ impl RunResult {
         for (n, v) in &self.errors {
             f.push((format!("error:{n}"), num(*v)));
         }
+        if self.record_bytes > 0 {
+            let vals = [
+                self.record_bytes.to_string(),
+                num(self.record_bytes_per_step),
+                num(self.record_bytes_per_point),
+            ];
+            for (c, v) in RECORD_COLUMNS.iter().zip(vals) {
+                f.push((c.to_string(), v));
+            }
+        }
         f
     }
 
@@ -449,6 +493,9 @@ impl RunResult {
                 .filter_map(|c| c.strip_prefix("error:").map(|k| (k.to_string(), x(c))))
                 .filter(|(_, v)| !v.is_nan())
                 .collect(),
+            record_bytes: s("record_bytes").parse().unwrap_or(0),
+            record_bytes_per_step: x("record_bytes_per_step"),
+            record_bytes_per_point: x("record_bytes_per_point"),
         }
     }
 
@@ -644,6 +691,10 @@ impl Folder {
     }
     pub fn run_scene(&self, id: &str) -> PathBuf {
         self.runs().join(format!("{id}.toml"))
+    }
+    /// A run's recording (`sweep --record`).
+    pub fn recording(&self, id: &str) -> PathBuf {
+        self.0.join("recordings").join(format!("{id}.rrd"))
     }
     pub fn result(&self, id: &str) -> PathBuf {
         self.results().join(format!("{id}.csv"))

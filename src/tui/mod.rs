@@ -177,7 +177,9 @@ fn engine(
             Command::Quit => break,
         }
     }
-    if let Some(rec) = recorder {
+    if let Some(mut rec) = recorder {
+        // The state the session ended on, whatever the cadence.
+        let _ = rec.log_final_state(&sim);
         let _ = rec.event("end of interactive session", "INFO");
         let _ = rec.finish();
     }
@@ -186,7 +188,12 @@ fn engine(
 /// Run the TUI on a simulation until the user quits. `recorder` receives
 /// every step. The terminal is restored on exit and on panic.
 pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
-    let mut app = App::new(&sim, recorder.as_ref().map(|r| r.path().display().to_string()));
+    let mut app = App::new(
+        &sim,
+        recorder
+            .as_ref()
+            .map(|r| format!("{} (points {})", r.path().display(), r.points_cadence())),
+    );
     let (cmd_tx, cmd_rx) = mpsc::channel();
     let cancel = Arc::new(AtomicBool::new(false));
     let (up_tx, up_rx) = mpsc::channel();
