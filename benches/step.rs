@@ -1,11 +1,15 @@
-//! Timing of assembly, factorisation and solve for a scene of about 100,000
-//! unknowns: a 224 x 224 cell block (2x2 points per cell, 200,704 points)
-//! under self-weight on rollers.
+//! Timing of the linear step's phases, with the calls the linear driver
+//! makes (mapping, pattern from the point groups, assembly of the group
+//! stiffnesses, Cholesky, solve) and the factorisations Newton chooses
+//! between (Cholesky and LU of the same matrix), for a scene of about
+//! 100,000 unknowns: a 224 x 224 cell block (2x2 points per cell, 200,704
+//! points) under self-weight on rollers. The whole-run table with peak
+//! memory and the solver's ratios is `cargo bench --bench solver`.
 //!
 //! `cargo bench --bench step`
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mpmlab::assembly::Mapping;
+use mpmlab::assembly::{Mapping, Pattern, Storage};
 use mpmlab::linalg;
 use mpmlab::scene::ConditionMode;
 use mpmlab::{Model, Simulation};
@@ -61,12 +65,33 @@ fn bench(c: &mut Criterion) {
     g.bench_function("map points to grid", |b| {
         b.iter(|| Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0))
     });
-    g.bench_function("pattern", |b| b.iter(|| map.pattern()));
-    let pattern = map.pattern();
-    g.bench_function("assemble stiffness", |b| {
-        b.iter(|| pattern.assemble(&map, &model.points, &d_of))
+    let blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
+    g.bench_function("pattern", |b| {
+        b.iter(|| Pattern::new(&map.dofs, &blocks, Storage::Lower))
     });
-    let (k, _) = pattern.assemble(&map, &model.points, &d_of);
+    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let assemble = || {
+        pattern.assemble_with(&map.dofs, &blocks, |b, out| {
+            map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
+        })
+    };
+    g.bench_function("assemble stiffness", |b| b.iter(assemble));
+    let (k, _) = assemble();
+    {
+        use mpmlab::solver::{Factorisation, Symbolic, Symmetry};
+        let symbolic = Symbolic::new(&k, Symmetry::Symmetric).unwrap();
+        g.bench_function("newton: cholesky (numeric, symbolic reused)", |b| {
+            b.iter(|| Factorisation::new(&symbolic, &k).unwrap())
+        });
+        let whole = Pattern::new(&map.dofs, &blocks, Storage::Full);
+        let (kf, _) = whole.assemble_with(&map.dofs, &blocks, |b, out| {
+            map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
+        });
+        let lu = Symbolic::new(&kf, Symmetry::General).unwrap();
+        g.bench_function("newton: LU of the same matrix (numeric, symbolic reused)", |b| {
+            b.iter(|| Factorisation::new(&lu, &kf).unwrap())
+        });
+    }
     g.bench_function("cholesky (symbolic + numeric)", |b| {
         b.iter(|| linalg::cholesky(&k).unwrap())
     });

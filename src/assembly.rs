@@ -232,13 +232,6 @@ impl Mapping {
         }
     }
 
-    /// The sparsity pattern of the reduced (symmetric) stiffness for these
-    /// groups, lower triangle.
-    pub fn pattern(&self) -> Pattern {
-        let blocks: Vec<&[usize]> = self.groups.iter().map(|g| g.nodes.as_slice()).collect();
-        Pattern::new(&self.dofs, &blocks, Storage::Lower)
-    }
-
     /// The dofs of a group's nodes, `[x0, y0, x1, y1, ...]`.
     pub fn group_dofs(&self, g: &Group) -> Vec<Dof> {
         g.nodes.iter().flat_map(|&n| self.dofs.node_dof[n]).collect()
@@ -418,19 +411,5 @@ impl Pattern {
             }
         }
         (SparseColMat::new(self.symbolic.clone(), values), coupling)
-    }
-
-    /// Assemble the reduced small-strain stiffness (lower triangle) of the
-    /// mapping's groups and the coupling `K_fc du_c`.
-    pub fn assemble(
-        &self,
-        map: &Mapping,
-        pts: &Points,
-        d_of: &impl Fn(usize) -> [[f64; 3]; 3],
-    ) -> (SparseColMat<usize, f64>, Vec<f64>) {
-        let blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-        self.assemble_with(&map.dofs, &blocks, |b, out| {
-            map.group_stiffness(&map.groups[b], pts, d_of, out)
-        })
     }
 }

@@ -454,6 +454,9 @@ struct Table {
     quiet: bool,
     last: Option<StepReport>,
     total_time: f64,
+    /// Every phase's time summed over the steps, and the cutbacks taken.
+    phases: mpmlab::report::Timings,
+    cutbacks: usize,
 }
 
 impl Observer for Table {
@@ -476,6 +479,8 @@ impl Observer for Table {
             );
         }
         self.total_time += r.timings.total;
+        self.phases.add(&r.timings);
+        self.cutbacks += r.solver.as_ref().map_or(0, |s| s.cutbacks.len());
         self.last = Some(r.clone());
         None
     }
@@ -535,6 +540,8 @@ fn run(
         quiet,
         last: None,
         total_time: 0.0,
+        phases: Default::default(),
+        cutbacks: 0,
     };
     // Ctrl-C or SIGTERM: cancel the running step, keep the last good state
     // and close the recording; a second one ends the process at once.
@@ -560,7 +567,8 @@ fn run(
             code = ExitCode::from(130);
         }
     }
-    let (last, total_time) = (table.last, table.total_time);
+    let (last, total_time, phases) = (table.last, table.total_time, table.phases);
+    let cutbacks = table.cutbacks;
     if let Some(r) = &last {
         let errs: Vec<String> = r
             .errors
@@ -584,6 +592,23 @@ fn run(
             } else {
                 format!(", {}", errs.join(", "))
             }
+        );
+    }
+    if last.is_some() {
+        let p = &phases;
+        out!(
+            "phases (s): mapping {:.3}, pattern {:.3}, assembly {:.3}, factorisation {:.3}, solve {:.3}, \
+             condition {:.3}, update {:.3}, other {:.3}; {} cutbacks; peak memory {:.0} MB",
+            p.mapping,
+            p.pattern,
+            p.assembly,
+            p.factorisation,
+            p.solve,
+            p.condition,
+            p.update,
+            p.other(),
+            cutbacks,
+            mpmlab::sweep::peak_rss_kb() as f64 / 1024.0
         );
     }
     if let Some((r, d)) = last.as_ref().and_then(|r| r.dynamics.as_ref().map(|d| (r, d))) {

@@ -46,7 +46,7 @@ fn small_sweep_table_rates_restart_and_charts() {
     let header = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
     let header = header.lines().next().unwrap();
     assert!(
-        header.starts_with("id,set:h,set:ppc,completed,steps_done,steps_total,failed_step,failure,wall_s,assembly_s,factorisation_s,solve_s,condition_s,unknowns,iterations,peak_rss_kb,condition,error:"),
+        header.starts_with("id,set:h,set:ppc,completed,steps_done,steps_total,failed_step,failure,wall_s,assembly_s,factorisation_s,solve_s,condition_s,unknowns,iterations,peak_rss_kb,condition,mapping_s,pattern_s,update_s,negative_pivots,cutbacks,error:"),
         "{header}"
     );
     // Values: the G (31) error of the confined column is exactly h/(4H)
@@ -287,7 +287,7 @@ fn recorded_sweep_reports_recording_sizes() {
             .lines()
             .next()
             .unwrap()
-            .contains(",condition,record_bytes,record_bytes_per_step,record_bytes_per_point,error:"),
+            .contains(",cutbacks,record_bytes,record_bytes_per_step,record_bytes_per_point,error:"),
         "{header}"
     );
     let _ = std::fs::remove_dir_all(&dir);

@@ -596,15 +596,35 @@ impl Recorder {
         }
         let t = &report.timings;
         for (name, v) in [
+            ("mapping", t.mapping),
+            ("pattern", t.pattern),
             ("assembly", t.assembly),
             ("factorisation", t.factorisation),
             ("solve", t.solve),
             ("condition", t.condition),
+            ("update", t.update),
             ("total", t.total),
         ] {
             self.scalar(&format!("metrics/time/{name}"), v)?;
         }
         self.scalar("metrics/unknowns", report.unknowns as f64)?;
+        if let Some(sr) = &report.solver {
+            // The inertia: negative pivots of the last tangent (a loss of
+            // stability or a spurious mode); cutbacks as warnings.
+            if let Some(n) = sr.negative_pivots {
+                self.scalar("metrics/solver/negative_pivots", n as f64)?;
+            }
+            self.scalar("metrics/solver/cutbacks", sr.cutbacks.len() as f64)?;
+            for c in &sr.cutbacks {
+                self.event(
+                    &format!(
+                        "step {}: cutback: the increment lambda {:.6} -> {:.6} failed and was halved: {}",
+                        report.step, c.from, c.to, c.reason
+                    ),
+                    "WARN",
+                )?;
+            }
+        }
         for b in &report.ibm {
             let base = format!("metrics/ibm/{}", b.name);
             self.scalar(&format!("{base}/reaction_x"), b.reaction[0])?;

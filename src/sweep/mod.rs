@@ -280,6 +280,14 @@ pub struct RunResult {
     pub factorisation_s: f64,
     pub solve_s: f64,
     pub condition_s: f64,
+    /// The other phases of the steps (s): every phase is accounted for.
+    pub mapping_s: f64,
+    pub pattern_s: f64,
+    pub update_s: f64,
+    /// Negative pivots of the last tangent (its inertia; -1 when unknown).
+    pub negative_pivots: i64,
+    /// Load-step cutbacks over the run.
+    pub cutbacks: usize,
     /// Unknowns of the last step.
     pub unknowns: usize,
     /// Newton iterations over all steps (linear steps count one).
@@ -300,8 +308,9 @@ pub struct RunResult {
 /// The columns of a recorded run, after the errors.
 pub const RECORD_COLUMNS: [&str; 3] = ["record_bytes", "record_bytes_per_step", "record_bytes_per_point"];
 
-/// Peak resident set size of this process (kB), from `/proc/self/status`.
-fn peak_rss_kb() -> u64 {
+/// Peak resident set size of this process (kB), from `/proc/self/status`
+/// (0 where it is not available).
+pub fn peak_rss_kb() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
@@ -380,6 +389,13 @@ impl Observer for RunResult {
         self.factorisation_s += t.factorisation;
         self.solve_s += t.solve;
         self.condition_s += t.condition;
+        self.mapping_s += t.mapping;
+        self.pattern_s += t.pattern;
+        self.update_s += t.update;
+        if let Some(s) = &rep.solver {
+            self.negative_pivots = s.negative_pivots.map_or(-1, |n| n as i64);
+            self.cutbacks += s.cutbacks.len();
+        }
         self.unknowns = rep.unknowns;
         self.iterations += rep.iterations.max(1);
         self.condition = rep.condition.map_or(f64::NAN, |c| c.value);
@@ -409,6 +425,11 @@ pub const COLUMNS: &[&str] = &[
     "iterations",
     "peak_rss_kb",
     "condition",
+    "mapping_s",
+    "pattern_s",
+    "update_s",
+    "negative_pivots",
+    "cutbacks",
 ];
 
 fn num(v: f64) -> String {
@@ -442,6 +463,11 @@ impl RunResult {
             self.iterations.to_string(),
             self.peak_rss_kb.to_string(),
             num(self.condition),
+            num(self.mapping_s),
+            num(self.pattern_s),
+            num(self.update_s),
+            self.negative_pivots.to_string(),
+            self.cutbacks.to_string(),
         ];
         for (c, v) in COLUMNS.iter().zip(vals) {
             f.push((c.to_string(), v));
@@ -488,6 +514,11 @@ impl RunResult {
             iterations: n("iterations"),
             peak_rss_kb: s("peak_rss_kb").parse().unwrap_or(0),
             condition: x("condition"),
+            mapping_s: x("mapping_s"),
+            pattern_s: x("pattern_s"),
+            update_s: x("update_s"),
+            negative_pivots: s("negative_pivots").parse().unwrap_or(-1),
+            cutbacks: n("cutbacks"),
             errors: order
                 .iter()
                 .filter_map(|c| c.strip_prefix("error:").map(|k| (k.to_string(), x(c))))

@@ -533,7 +533,15 @@ impl App {
                 self.progress = None;
                 self.failure = None;
                 self.show_failure = false;
-                self.status = format!("step {} done in {:.3} s", report.step, report.timings.total);
+                let cuts = report.solver.as_ref().map_or(0, |s| s.cutbacks.len());
+                self.status = if cuts > 0 {
+                    format!(
+                        "step {} done in {:.3} s after {cuts} load-step cutback(s): the increment was halved",
+                        report.step, report.timings.total
+                    )
+                } else {
+                    format!("step {} done in {:.3} s", report.step, report.timings.total)
+                };
                 self.reports.push(*report);
                 self.view = *view;
             }

@@ -675,13 +675,33 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
     );
 }
 
+/// The factorisation of the step's last system and the tangent's inertia,
+/// as in the run table: `chol`, `ldlt-3` (three negative pivots: a loss of
+/// stability or a spurious mode), `lu`; and the cutbacks taken.
+fn solver_label(s: &crate::report::SolverReport) -> String {
+    use crate::solver::FactorKind;
+    let f = match (s.factorisation, s.negative_pivots) {
+        (None, _) => "-".to_string(),
+        (Some(FactorKind::Ldlt), Some(n)) => format!("ldlt-{n}"),
+        (Some(k), _) => k.label().replace("cholesky", "chol"),
+    };
+    match s.cutbacks.len() {
+        0 => f,
+        n => format!("{f} cut {n}"),
+    }
+}
+
 /// The quasi-static lines of the last-step panel: residuals, condition
 /// number, energies, timings, boundaries.
 fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
     let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.2e}")).collect();
     lines.push(Line::raw(format!(
-        "step {}/{}  load factor {:.3}  unknowns {}",
-        r.step, r.load_steps, r.load_factor, r.unknowns
+        "step {}/{}  load factor {:.3}  unknowns {}  {}",
+        r.step,
+        r.load_steps,
+        r.load_factor,
+        r.unknowns,
+        r.solver.as_ref().map_or(String::new(), solver_label)
     )));
     lines.push(Line::raw(format!(
         "residuals [{}]  |r0| {:.3e} N",
@@ -705,7 +725,10 @@ fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
     let t = &r.timings;
     lines.push(Line::raw(format!(
         "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
-        t.assembly, t.factorisation, t.solve, t.condition
+        t.mapping + t.pattern + t.assembly,
+        t.factorisation,
+        t.solve,
+        t.condition
     )));
     for b in &r.ibm {
         lines.push(Line::raw(format!(

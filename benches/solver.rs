@@ -1,0 +1,270 @@
+//! The solver benchmark: one table of phase times, unknowns and peak
+//! memory for the scenes that size the implicit solver, each run as its own
+//! `mpmlab run` process (so each peak memory is its own), and the ratios the
+//! solver is held to:
+//!
+//! - a linear block of 10^5 unknowns (standard basis, 2x2 points per cell)
+//!   with the default condition estimate and with conditioning off;
+//! - the same at 10^6 unknowns (one load step each; skip with
+//!   `MPMLAB_BENCH_SMALL=1`);
+//! - a 65,536-point GIMP block, linear and finite deformation: one Newton
+//!   iteration against one linear step on the same grid and points;
+//! - the 102,400-point finite-deformation block, 40 load steps;
+//! - the 102,400-point explicit block (point-steps per second).
+//!
+//! `cargo bench --bench solver`. Times are wall-clock, one run each, on
+//! whatever else the machine is doing: compare ratios within one run.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// What one `mpmlab run` printed, summed over its steps.
+#[derive(Debug, Default)]
+struct Run {
+    name: String,
+    unknowns: usize,
+    steps: usize,
+    iterations: usize,
+    points: usize,
+    /// mapping, pattern, assembly, factorisation, solve, condition, update, other
+    phases: [f64; 8],
+    total: f64,
+    peak_mb: f64,
+}
+
+fn block(name: &str, cells: usize, basis: &str, kind: &str, steps: usize, condition: &str) -> String {
+    format!(
+        r#"[scene]
+name = "{name}"
+[grid]
+origin = [0.0, 0.0]
+size = [{cells}.0, {cells}.0]
+h = 1.0
+[[material]]
+name = "m"
+E = 1.0e8
+nu = 0.3
+density = 1000.0
+[[body]]
+name = "block"
+material = "m"
+points_per_cell = 2
+basis = "{basis}"
+region = {{ shape = "rectangle", min = [0.0, 0.0], max = [{cells}.0, {cells}.0] }}
+[[dirichlet]]
+kind = "roller"
+x = 0.0
+[[dirichlet]]
+kind = "roller"
+x = {cells}.0
+[[dirichlet]]
+kind = "roller"
+y = 0.0
+[loads]
+gravity = [0.0, -10.0]
+[analysis]
+kind = "{kind}"
+load_steps = {steps}
+condition = "{condition}"
+"#
+    )
+}
+
+fn num(s: &str) -> &str {
+    s.trim_matches(|c: char| !c.is_ascii_digit() && c != '.' && c != '-' && c != 'e')
+}
+
+fn run(dir: &Path, name: &str, scene: &str, steps: Option<usize>) -> Run {
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, scene).expect("write the bench scene");
+    let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+        // The scene's memory estimate is an upper bound made for refusing
+        // hostile scenes; the 10^6-unknown block is meant to run.
+        .args(["run", path.to_str().expect("utf-8 path"), "--max-memory", "20G"])
+        .output()
+        .expect("run mpmlab");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{name}: {text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut r = Run {
+        name: name.into(),
+        ..Default::default()
+    };
+    for line in text.lines() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        if line.starts_with("scene `") {
+            r.points = t
+                .iter()
+                .position(|w| *w == "points,")
+                .map_or(0, |i| t[i - 1].parse().unwrap_or(0));
+        } else if t.first().is_some_and(|w| w.parse::<usize>().is_ok()) && t.len() > 3 {
+            r.steps += 1;
+            r.unknowns = r.unknowns.max(t[2].parse().unwrap_or(0));
+            r.iterations += t[3].parse::<usize>().unwrap_or(0);
+        } else if let Some(rest) = line.strip_prefix("phases (s): ") {
+            let v: Vec<f64> = rest
+                .split([',', ';'])
+                .filter_map(|f| f.split_whitespace().last().and_then(|x| num(x).parse().ok()))
+                .collect();
+            r.phases.copy_from_slice(&v[..8]);
+            r.peak_mb = rest
+                .split("peak memory ")
+                .nth(1)
+                .and_then(|m| m.split_whitespace().next())
+                .and_then(|m| m.parse().ok())
+                .unwrap_or(0.0);
+        } else if let Some(rest) = line.strip_prefix("summary: ") {
+            r.total = rest
+                .split(", ")
+                .nth(1)
+                .and_then(|f| f.split_whitespace().next())
+                .and_then(|x| x.parse().ok())
+                .unwrap_or(f64::NAN);
+        }
+    }
+    if let Some(s) = steps {
+        r.steps = s;
+    }
+    r
+}
+
+fn main() {
+    // Criterion's arguments (`--bench`) are accepted and ignored.
+    let dir: PathBuf = std::env::temp_dir().join(format!("mpmlab-solver-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let small = std::env::var_os("MPMLAB_BENCH_SMALL").is_some();
+    let mut runs = Vec::new();
+    let mut go = |name: &str, scene: String, steps: Option<usize>| {
+        eprintln!("running {name} ...");
+        let r = run(&dir, name, &scene, steps);
+        runs.push(r);
+        runs.len() - 1
+    };
+    let lin5 = go(
+        "linear-1e5",
+        block("linear-1e5", 224, "standard", "quasi-static-linear", 1, "auto"),
+        None,
+    );
+    let lin5off = go(
+        "linear-1e5-off",
+        block("linear-1e5-off", 224, "standard", "quasi-static-linear", 1, "off"),
+        None,
+    );
+    let (lin6, lin6off) = if small {
+        (None, None)
+    } else {
+        (
+            Some(go(
+                "linear-1e6",
+                block("linear-1e6", 708, "standard", "quasi-static-linear", 1, "auto"),
+                None,
+            )),
+            Some(go(
+                "linear-1e6-off",
+                block("linear-1e6-off", 708, "standard", "quasi-static-linear", 1, "off"),
+                None,
+            )),
+        )
+    };
+    let gimp_lin = go(
+        "gimp-linear",
+        block("gimp-linear", 128, "gimp", "quasi-static-linear", 1, "off"),
+        None,
+    );
+    let gimp_fin = go(
+        "gimp-finite",
+        block("gimp-finite", 128, "gimp", "quasi-static-finite", 1, "off"),
+        None,
+    );
+    let fin40 = go(
+        "finite-102400",
+        block("finite-102400", 160, "gimp", "quasi-static-finite", 40, "off"),
+        None,
+    );
+    let explicit_scene =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/scenes/explicit-block.toml"))
+            .expect("the explicit block scene");
+    let expl = go("explicit-102400", explicit_scene, None);
+
+    println!(
+        "{:<16} {:>9} {:>5} {:>5} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8}",
+        "run",
+        "unknowns",
+        "steps",
+        "iters",
+        "map s",
+        "pat s",
+        "asm s",
+        "fact s",
+        "solve s",
+        "cond s",
+        "upd s",
+        "other s",
+        "total s",
+        "peak MB"
+    );
+    for r in &runs {
+        let p = &r.phases;
+        println!(
+            "{:<16} {:>9} {:>5} {:>5} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>8.3} {:>9.3} {:>8.0}",
+            r.name,
+            r.unknowns,
+            r.steps,
+            r.iterations,
+            p[0],
+            p[1],
+            p[2],
+            p[3],
+            p[4],
+            p[5],
+            p[6],
+            p[7],
+            r.total,
+            r.peak_mb
+        );
+    }
+    println!();
+    let cond_share = |r: &Run| r.phases[5] / r.total;
+    let l5 = &runs[lin5];
+    println!(
+        "condition estimate, linear 1e5: {:.0}% of the step (target <= 20%)",
+        100.0 * cond_share(l5)
+    );
+    println!(
+        "peak memory, linear path: {:.0} MB per 1e5 unknowns (target <= 150)",
+        runs[lin5off].peak_mb / (runs[lin5off].unknowns as f64 / 1e5)
+    );
+    if let (Some(a), Some(b)) = (lin6, lin6off) {
+        println!(
+            "linear 1e6 step, estimate on / off: {:.2}x (target <= 2x); condition {:.0}% of the step",
+            runs[a].total / runs[b].total,
+            100.0 * cond_share(&runs[a])
+        );
+    }
+    let (gl, gf) = (&runs[gimp_lin], &runs[gimp_fin]);
+    println!(
+        "one Newton iteration / one linear step, same grid and points: {:.2}x (target <= 1.5x)",
+        (gf.total / gf.iterations.max(1) as f64) / gl.total
+    );
+    println!(
+        "Newton / linear peak memory, same points: {:.2}x (target <= 2x)",
+        gf.peak_mb / gl.peak_mb
+    );
+    let f = &runs[fin40];
+    println!(
+        "102,400-point finite block, 40 steps: {:.1} s (target <= 60), {:.0} MB (target <= 500)",
+        f.total, f.peak_mb
+    );
+    let e = &runs[expl];
+    println!(
+        "explicit block: {:.3e} point-steps per second ({} points, {} steps in {:.2} s)",
+        e.points as f64 * e.steps as f64 / e.total,
+        e.points,
+        e.steps,
+        e.total
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
