@@ -36,8 +36,7 @@ use faer::sparse::SparseColMat;
 use std::time::Instant;
 use transfer::{Bodies, Workspace};
 
-mod transfer;
-pub(crate) use transfer::Workspace as ExplicitWorkspace;
+pub(crate) mod transfer;
 
 pub use crate::report::{Conditioning, DynamicsReport};
 

@@ -114,7 +114,7 @@ struct RecordArgs {
     /// Record the points every N steps (metrics and events go in at every
     /// step; the first, last and failed steps always hold points).
     /// Overrides the scene's `[record]` cadence; default: every step up to
-    /// a budget of 5 million points times frames.
+    /// a budget of 2 million points times frames.
     #[arg(long, value_name = "N", conflicts_with = "record_dt")]
     record_every: Option<usize>,
     /// Explicit dynamics: record the points every T seconds of simulated time.

@@ -589,7 +589,7 @@ fn cut_back(
     let outcome = outcome.unwrap_or_else(|e| {
         Err(StepFailure::Internal {
             step,
-            message: crate::simulation::panic_message(e.as_ref()),
+            message: crate::report::panic_message(e.as_ref()),
         })
     });
     if outcome.is_err() {

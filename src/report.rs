@@ -328,3 +328,11 @@ pub struct Conditioning {
     pub stiffness: Option<Condition>,
     pub stiffness_stabilised: Option<Condition>,
 }
+
+/// The message of a caught panic.
+pub(crate) fn panic_message(e: &(dyn std::any::Any + Send)) -> String {
+    e.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| e.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panic".into())
+}

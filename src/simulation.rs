@@ -21,14 +21,6 @@
 pub use crate::report::{Energy, Progress, ProgressHook, StepFailure, StepReport, Timings};
 pub use crate::state::{Params, Simulation, Snapshot};
 
-/// The message of a caught panic.
-pub(crate) fn panic_message(e: &(dyn std::any::Any + Send)) -> String {
-    e.downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| e.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "panic".into())
-}
-
 impl Simulation {
     /// [`Simulation::step`], with a panic inside the engine turned into
     /// [`StepFailure::Internal`] so that observers (TUI, recordings) can
@@ -40,7 +32,7 @@ impl Simulation {
             Ok(r) => r,
             Err(e) => Err(StepFailure::Internal {
                 step,
-                message: panic_message(e.as_ref()),
+                message: crate::report::panic_message(e.as_ref()),
             }),
         }
     }

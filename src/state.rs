@@ -63,7 +63,7 @@ pub struct Simulation {
     /// Explicit dynamics: the mass pattern of the last step.
     pub(crate) mass_cache: MassCache,
     /// Explicit dynamics: the step's buffers, reused from step to step.
-    pub(crate) explicit: crate::dynamics::ExplicitWorkspace,
+    pub(crate) explicit: crate::dynamics::transfer::Workspace,
     /// The observer's progress hook (behind a mutex so steps can call it
     /// through `&self`).
     progress: Option<std::sync::Mutex<ProgressHook>>,

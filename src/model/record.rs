@@ -7,10 +7,12 @@ use crate::field::Field;
 use crate::scene::{AnalysisKind, FieldError, RecordSpec};
 
 /// Point frames a run's recording holds at most under the default
-/// cadence, counted in points times frames: about 120 MB before
+/// cadence, counted in points times frames: about 50 MB before
 /// compression with the default fields (24 bytes a point), whatever the
-/// scene's size. Runs below it record their points at every step.
-pub const POINT_FRAME_BUDGET: u64 = 5_000_000;
+/// scene's size. Runs below it record their points at every step. Sized so
+/// that recording the 102,400-point explicit block (about 40 ms a step)
+/// costs at most a tenth of its run (`cargo bench --bench record`).
+pub const POINT_FRAME_BUDGET: u64 = 2_000_000;
 
 /// When the points are recorded (besides the first and last step of a
 /// run, the state before a failed step and where a run is stopped).
@@ -199,8 +201,11 @@ mod tests {
 
     #[test]
     fn auto_keeps_small_runs_whole_and_caps_large_ones() {
-        assert_eq!(Plan::new(Cadence::Auto, 1000, 4828, None).every, Some(1));
-        assert_eq!(Plan::new(Cadence::Auto, 100, 102_400, None).every, Some(3));
+        // 2 million point frames: 1000 steps of 2000 points fit whole; 100
+        // steps of the 102,400-point block keep every ceil(5.12) = 6th.
+        assert_eq!(Plan::new(Cadence::Auto, 1000, 2000, None).every, Some(1));
+        assert_eq!(Plan::new(Cadence::Auto, 1000, 2001, None).every, Some(2));
+        assert_eq!(Plan::new(Cadence::Auto, 100, 102_400, None).every, Some(6));
         let big = Plan::new(Cadence::Auto, 4000, 102_400, None);
         assert!(
             big.frames() as u64 * 102_400 <= 2 * POINT_FRAME_BUDGET,
