@@ -221,10 +221,11 @@ pub enum ConditionMethod {
     DenseLanczosInverse,
     /// Lanczos for `lambda_max` and Lanczos on the inverse for `lambda_min`.
     Lanczos,
-    /// Lanczos for `lambda_max` and on the inverse for `lambda_min`, each
-    /// stopped after at most [`ESTIMATE_ITERATIONS`] iterations or when the
-    /// Ritz value settles to [`ESTIMATE_TOLERANCE`]: the default above `dense_limit`
-    /// (a fifth or less of a step's time). The extreme Ritz values are lower
+    /// The plain three-term Lanczos recurrence for `lambda_max` (checked
+    /// every 5 products) and Lanczos on the inverse for `lambda_min` (at
+    /// most [`ESTIMATE_ITERATIONS`] solves), each stopped when the Ritz
+    /// value settles to [`ESTIMATE_TOLERANCE`]: the default above
+    /// `dense_limit` (a fifth or less of a step's time). The extreme Ritz values are lower
     /// bounds of `lambda_max` and `1/lambda_min`, so the estimate is a lower
     /// bound of the condition number, usually within a few percent.
     Estimate,
@@ -358,7 +359,7 @@ pub fn condition_by(
     let hi = match how {
         // Products with `A` are cheap, its top spectrum is clustered: many
         // iterations of the three-term recurrence, no basis kept.
-        Eigen::Estimate => lanczos_max_short(n, |x| sym_lower_mul(a, x), 200, 1e-3, keep_going)?,
+        Eigen::Estimate => lanczos_max_short(n, |x| sym_lower_mul(a, x), 200, ESTIMATE_TOLERANCE, keep_going)?,
         _ => lanczos_max_with(n, |x| sym_lower_mul(a, x), iterations, tolerance, keep_going)?,
     };
     let lo = inverse_min()?;
