@@ -412,12 +412,9 @@ pub fn lanczos_max_with(
     tolerance: f64,
     keep_going: &dyn Fn() -> bool,
 ) -> Option<f64> {
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut rand = XorShift::new(0x2545_f491_4f6c_dd1d);
-    let mut q: Vec<f64> = (0..n).map(|_| rand.unit() + 0.5).collect();
-    let nq = dot(&q, &q).sqrt();
-    q.iter_mut().for_each(|v| *v /= nq);
+    let q = start_vector(n);
     let mut basis: Vec<Vec<f64>> = vec![q];
+    let dot = dot_product;
     let (mut alpha, mut beta) = (Vec::new(), Vec::<f64>::new());
     let mut last = f64::NAN;
     let max_iter = n.min(max_iter);
@@ -466,11 +463,8 @@ pub fn lanczos_max_short(
     tolerance: f64,
     keep_going: &dyn Fn() -> bool,
 ) -> Option<f64> {
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut rand = XorShift::new(0x2545_f491_4f6c_dd1d);
-    let mut q: Vec<f64> = (0..n).map(|_| rand.unit() + 0.5).collect();
-    let nq = dot(&q, &q).sqrt();
-    q.iter_mut().for_each(|v| *v /= nq);
+    let mut q = start_vector(n);
+    let dot = dot_product;
     let mut prev = vec![0.0; n];
     let (mut alpha, mut beta) = (Vec::new(), Vec::<f64>::new());
     let mut last = f64::NAN;
@@ -503,6 +497,20 @@ pub fn lanczos_max_short(
         prev = std::mem::replace(&mut q, w.into_iter().map(|v| v / bnorm).collect());
     }
     Some(last)
+}
+
+fn dot_product(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// The Lanczos runs' fixed, reproducible start: pseudo-random positive
+/// entries, unit length (the same on every machine).
+fn start_vector(n: usize) -> Vec<f64> {
+    let mut rand = XorShift::new(0x2545_f491_4f6c_dd1d);
+    let mut q: Vec<f64> = (0..n).map(|_| rand.unit() + 0.5).collect();
+    let nq = dot_product(&q, &q).sqrt();
+    q.iter_mut().for_each(|v| *v /= nq);
+    q
 }
 
 /// Largest eigenvalue of the symmetric tridiagonal matrix with diagonal
