@@ -118,18 +118,6 @@ pub fn solve_lu(factor: &LuFactor, b: &[f64], transpose: bool) -> Vec<f64> {
     (0..b.len()).map(|i| x[(i, 0)]).collect()
 }
 
-/// 1-norm condition estimate `|A|_1 est(|A^-1|_1)` of a non-symmetric
-/// matrix (all entries stored) through its LU factor; see
-/// [`one_norm_estimate`].
-pub fn one_norm_condition(a: &SparseColMat<usize, f64>, factor: &LuFactor) -> Condition {
-    one_norm_estimate(
-        one_norm(a, false),
-        a.nrows(),
-        |x| solve_lu(factor, x, false),
-        |x| solve_lu(factor, x, true),
-    )
-}
-
 /// `|A|_1`, the largest column sum of `|a_ij|`, of a matrix with every
 /// entry stored or (`lower`) of a symmetric one given by its lower triangle.
 pub fn one_norm(a: &SparseColMat<usize, f64>, lower: bool) -> f64 {
@@ -229,7 +217,7 @@ pub enum ConditionMethod {
     /// bounds of `lambda_max` and `1/lambda_min`, so the estimate is a lower
     /// bound of the condition number, usually within a few percent.
     Estimate,
-    /// 1-norm estimate for non-symmetric tangents (`lambda_min` and
+    /// 1-norm estimate for Newton tangents, through their factor (`lambda_min` and
     /// `lambda_max` then hold `1/|A^-1|_1` and `|A|_1`).
     OneNormEstimate,
     /// The Cholesky factorisation broke down: the matrix is singular to
@@ -396,15 +384,10 @@ impl XorShift {
 
 /// Largest eigenvalue of a symmetric operator of size `n` by Lanczos with
 /// full reorthogonalisation, from a fixed pseudo-random start (so results
-/// are reproducible). Stops when the largest Ritz value settles to 1e-10
-/// relative or after 120 iterations.
-pub fn lanczos_max(n: usize, op: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
-    lanczos_max_with(n, op, 120, 1e-10, &|| true).expect("never cancelled")
-}
-
-/// [`lanczos_max`] stopped after `max_iter` iterations or when the Ritz
-/// value settles to `tolerance` relative; `None` when `keep_going`, asked
-/// before each iteration, returns `false`.
+/// are reproducible), stopped after `max_iter` iterations or when the
+/// largest Ritz value settles to `tolerance` relative (full runs: 120 and
+/// 1e-10); `None` when `keep_going`, asked before each iteration, returns
+/// `false`.
 pub fn lanczos_max_with(
     n: usize,
     op: impl Fn(&[f64]) -> Vec<f64>,
@@ -529,39 +512,4 @@ fn tridiagonal_max(alpha: &[f64], beta: &[f64]) -> f64 {
         }
     });
     t.self_adjoint_eigenvalues(Side::Lower).map_or(f64::NAN, |ev| ev[m - 1])
-}
-
-/// Largest `|a_ij - a_ji|` over the largest `|a_ij|` of a matrix with every
-/// entry stored (0 for a symmetric matrix).
-pub fn asymmetry(a: &SparseColMat<usize, f64>) -> f64 {
-    let t = a.as_ref().transpose().to_col_major().expect("transpose");
-    let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
-    let (tcp, tri, tv) = (t.col_ptr(), t.row_idx(), t.val());
-    let mut big = 0.0f64;
-    let mut diff = 0.0f64;
-    for c in 0..a.ncols() {
-        let (mut i, mut j) = (cp[c], tcp[c]);
-        while i < cp[c + 1] || j < tcp[c + 1] {
-            let ra = if i < cp[c + 1] { ri[i] } else { usize::MAX };
-            let rt = if j < tcp[c + 1] { tri[j] } else { usize::MAX };
-            let (x, y) = if ra == rt {
-                i += 1;
-                j += 1;
-                (v[i - 1], tv[j - 1])
-            } else if ra < rt {
-                i += 1;
-                (v[i - 1], 0.0)
-            } else {
-                j += 1;
-                (0.0, tv[j - 1])
-            };
-            big = big.max(x.abs());
-            diff = diff.max((x - y).abs());
-        }
-    }
-    if big > 0.0 {
-        diff / big
-    } else {
-        0.0
-    }
 }

@@ -142,23 +142,6 @@ impl Simulation {
         &self.state.active_cells
     }
 
-    fn commit_cells(
-        &mut self,
-        points: Points,
-        step: usize,
-        work: f64,
-        active_cells: Vec<usize>,
-        faces: &[ghost::GhostFace],
-        iterations: usize,
-    ) {
-        self.state.points = points;
-        self.state.step = step;
-        self.state.external_work += work;
-        self.state.active_cells = active_cells;
-        self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
-        self.state.iterations += iterations;
-    }
-
     /// Commit a quasi-static step and move the moving implicit boundaries
     /// by the load factor's increment `dlambda`.
     #[allow(clippy::too_many_arguments)]
@@ -172,7 +155,12 @@ impl Simulation {
         iterations: usize,
         dlambda: f64,
     ) {
-        self.commit_cells(points, step, work, active_cells, faces, iterations);
+        self.state.points = points;
+        self.state.step = step;
+        self.state.external_work += work;
+        self.state.active_cells = active_cells;
+        self.state.ghost_faces = faces.iter().map(|f| ghost::face_segment(&self.model.grid, f)).collect();
+        self.state.iterations += iterations;
         for (off, b) in self.state.ibm_offsets.iter_mut().zip(&self.model.ibm) {
             if b.moves {
                 let m = b.motion();
