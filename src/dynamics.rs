@@ -580,6 +580,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
             conditioning,
         }),
         solver: None,
+        probes: Vec::new(),
     })
 }
 

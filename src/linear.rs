@@ -105,6 +105,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             cutbacks: Vec::new(),
             substeps: 1,
         }),
+        probes: Vec::new(),
     })
 }
 

@@ -8,6 +8,7 @@ use mpmlab::record::Recorder;
 use mpmlab::runner::{Observer, RunEnd};
 use mpmlab::scene::Scene;
 use mpmlab::simulation::{Simulation, StepReport};
+use mpmlab::units::Quantity;
 use mpmlab::Model;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -36,26 +37,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Cmd {
     /// Run a scene headless: per-step table and summary.
-    Run {
-        scene: PathBuf,
-        /// Write a rerun recording (.rrd) of the run. An existing file is
-        /// replaced only when it is a recording (or with --force); never the
-        /// scene itself.
-        #[arg(long)]
-        record: Option<PathBuf>,
-        /// Replace an existing --record file whatever it holds.
-        #[arg(long, requires = "record")]
-        force: bool,
-        #[command(flatten)]
-        cadence: RecordArgs,
-        /// Print only the summary.
-        #[arg(long)]
-        quiet: bool,
-        /// Refuse scenes whose estimated memory exceeds this (bytes, or
-        /// with k, M, G, T); default half of the available memory.
-        #[arg(long, value_name = "SIZE", value_parser = parse_size)]
-        max_memory: Option<u64>,
-    },
+    Run(RunArgs),
     /// Validate a scene file without running it.
     Check {
         scene: PathBuf,
@@ -102,10 +84,58 @@ enum Cmd {
         /// with k, M, G, T); default half of the available memory.
         #[arg(long, value_name = "SIZE", value_parser = parse_size)]
         max_memory: Option<u64>,
+        /// Start from a checkpoint of this scene (`run --checkpoint`, or `w`
+        /// in the TUI) and step on, with other parameters if you like: the
+        /// recording is the branch, and says where it started.
+        #[arg(long, value_name = "FILE")]
+        resume: Option<PathBuf>,
         /// Show a sweep folder instead (table, error against time and h).
-        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory", "record_every", "record_dt", "record_fields"])]
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory", "record_every", "record_dt", "record_fields", "resume"])]
         sweep: Option<PathBuf>,
     },
+}
+
+/// Arguments of `mpmlab run`.
+#[derive(clap::Args)]
+struct RunArgs {
+    scene: PathBuf,
+    /// Write a rerun recording (.rrd) of the run. An existing file is
+    /// replaced only when it is a recording (or with --force); never the
+    /// scene itself.
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// Write the step table as CSV: every reported quantity per step, with
+    /// units in the headers, probes as `probe:<name>:<key>`, and a row for
+    /// the initial state. An existing file is replaced only when it is
+    /// such a table (or with --force).
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+    /// Write checkpoints (the complete state, to resume from) into this
+    /// folder: `step-NNNNNN.ckpt` every --checkpoint-every steps, after
+    /// the last step, and of the last good state when a step fails or the
+    /// run is interrupted.
+    #[arg(long, value_name = "DIR")]
+    checkpoint: Option<PathBuf>,
+    /// Steps between checkpoints (default: only the last).
+    #[arg(long, value_name = "N", requires = "checkpoint", value_parser = clap::value_parser!(u64).range(1..))]
+    checkpoint_every: Option<u64>,
+    /// Continue from a checkpoint written for this scene (same scene file,
+    /// same program version); the run ends bit for bit where the
+    /// uninterrupted run ends.
+    #[arg(long, value_name = "FILE")]
+    resume: Option<PathBuf>,
+    /// Replace an existing --record or --csv file whatever it holds.
+    #[arg(long)]
+    force: bool,
+    #[command(flatten)]
+    cadence: RecordArgs,
+    /// Print only the summary.
+    #[arg(long)]
+    quiet: bool,
+    /// Refuse scenes whose estimated memory exceeds this (bytes, or
+    /// with k, M, G, T); default half of the available memory.
+    #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+    max_memory: Option<u64>,
 }
 
 /// What a recording holds, over the scene's `[record]` settings.
@@ -167,14 +197,7 @@ fn limits(max_memory: Option<u64>) -> Limits {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Some(Cmd::Run {
-            scene,
-            record,
-            force,
-            cadence,
-            quiet,
-            max_memory,
-        }) => run(&scene, record.as_deref(), force, &cadence, quiet, &limits(max_memory)),
+        Some(Cmd::Run(args)) => run(&args),
         Some(Cmd::Check { scene, max_memory }) => check(&scene, &limits(max_memory)),
         Some(Cmd::List { dir }) => list(&dir),
         Some(Cmd::Sweep(args)) => sweep(args),
@@ -188,6 +211,7 @@ fn main() -> ExitCode {
             force,
             cadence,
             max_memory,
+            resume,
             sweep: None,
         }) => tui(
             scene.as_deref(),
@@ -196,8 +220,17 @@ fn main() -> ExitCode {
             force,
             &cadence,
             &limits(max_memory),
+            resume.as_deref(),
         ),
-        None => tui(None, None, false, false, &RecordArgs::default(), &Limits::default()),
+        None => tui(
+            None,
+            None,
+            false,
+            false,
+            &RecordArgs::default(),
+            &Limits::default(),
+            None,
+        ),
     };
     match result {
         Ok(code) => code,
@@ -225,26 +258,43 @@ fn load(path: &Path, limits: &Limits) -> Result<(Simulation, String), ExitCode> 
 /// (its first bytes `RRF0`..`RRF2`) unless `force`. Refusals are bad
 /// arguments (exit 2); nothing has been written.
 fn check_record_target(record: &Path, scene: Option<&Path>, force: bool) -> Result<(), String> {
+    check_output_target("--record", record, scene, force, "a rerun recording", "run.rrd", |m| {
+        [b"RRF0", b"RRF1", b"RRF2"].iter().any(|x| m.starts_with(&x[..]))
+    })
+}
+
+/// Whether the output file `path` of option `flag` may be written: not
+/// the scene itself, not a directory, and, when it exists and is not
+/// empty, a file of its kind (`ours` of its first bytes) unless `force`.
+fn check_output_target(
+    flag: &str,
+    path: &Path,
+    scene: Option<&Path>,
+    force: bool,
+    kind: &str,
+    example: &str,
+    ours: impl Fn(&[u8]) -> bool,
+) -> Result<(), String> {
     let same = |a: &Path, b: &Path| match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
     };
     if let Some(scene) = scene {
-        if same(record, scene) && !force {
+        if same(path, scene) && !force {
             return Err(format!(
-                "--record {} is the scene file itself; give another recording path",
-                record.display()
+                "{flag} {} is the scene file itself; give another path",
+                path.display()
             ));
         }
     }
-    let Ok(meta) = std::fs::metadata(record) else {
+    let Ok(meta) = std::fs::metadata(path) else {
         return Ok(());
     };
     if meta.is_dir() {
         return Err(format!(
-            "--record {} is a directory; give a file path such as {}",
-            record.display(),
-            record.join("run.rrd").display()
+            "{flag} {} is a directory; give a file path such as {}",
+            path.display(),
+            path.join(example).display()
         ));
     }
     if force {
@@ -252,27 +302,27 @@ fn check_record_target(record: &Path, scene: Option<&Path>, force: bool) -> Resu
     }
     if !meta.is_file() {
         return Err(format!(
-            "--record {} exists and is not a regular file; refusing to write to it (--force to do so anyway)",
-            record.display()
+            "{flag} {} exists and is not a regular file; refusing to write to it (--force to do so anyway)",
+            path.display()
         ));
     }
-    let mut magic = [0u8; 4];
+    let mut magic = [0u8; 8];
     use std::io::Read as _;
-    let n = std::fs::File::open(record)
+    let n = std::fs::File::open(path)
         .and_then(|mut f| f.read(&mut magic))
         .map_err(|e| {
             format!(
-                "--record {}: cannot read the existing file: {}",
-                record.display(),
+                "{flag} {}: cannot read the existing file: {}",
+                path.display(),
                 mpmlab::scene::io_reason(&e)
             )
         })?;
-    if n == 0 || [b"RRF0", b"RRF1", b"RRF2"].contains(&&magic) {
+    if n == 0 || ours(&magic[..n]) {
         return Ok(());
     }
     Err(format!(
-        "--record {} exists and is not a rerun recording; refusing to overwrite it (choose another path, or --force)",
-        record.display()
+        "{flag} {} exists and is not {kind}; refusing to overwrite it (choose another path, or --force)",
+        path.display()
     ))
 }
 
@@ -283,15 +333,20 @@ fn check(path: &Path, limits: &Limits) -> Result<ExitCode> {
     };
     let m = sim.model();
     out!(
-        "{}: ok — scene `{}`, grid {}x{} (h = {}), {} bodies, {} points, {} load steps, memory estimate within the {} budget",
+        "{}: ok — scene `{}`, grid {}x{} (h = {} {}), {}, {} points, {} {} steps, memory estimate within the {} budget",
         path.display(),
         m.name,
         m.grid.nx,
         m.grid.ny,
         mpmlab::scene::number(m.grid.h),
-        m.bodies.len(),
-        m.points.len(),
+        m.units.of(Quantity::Length),
+        match m.bodies.len() {
+            1 => "1 body".to_string(),
+            n => format!("{n} bodies"),
+        },
+        sim.points().len(),
         m.analysis.load_steps,
+        if sim.time().is_some() { "time" } else { "load" },
         mpmlab::model::bytes(limits.max_memory)
     );
     Ok(ExitCode::SUCCESS)
@@ -320,6 +375,29 @@ fn list(dir: &Path) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The probes' columns of the run table: `<name>:<key>`, each at least
+/// 11 wide.
+fn probe_header(r: &StepReport) -> String {
+    r.probes
+        .iter()
+        .flat_map(|p| p.columns().into_iter().map(move |(k, _, _)| format!("{}:{k}", p.name)))
+        .map(|h| format!(" {h:>11}"))
+        .collect()
+}
+
+/// The probes' values of a step, under [`probe_header`].
+fn probe_cells(r: &StepReport) -> String {
+    r.probes
+        .iter()
+        .flat_map(|p| {
+            p.columns()
+                .into_iter()
+                .map(move |(k, _, v)| (format!("{}:{k}", p.name).len().max(11), v))
+        })
+        .map(|(w, v)| format!(" {v:>w$.4e}"))
+        .collect()
+}
+
 /// Header of the explicit-dynamics table (see [`dynamics_row`]).
 fn dynamics_header(first: &StepReport) -> String {
     let mut h = format!(
@@ -340,6 +418,7 @@ fn dynamics_header(first: &StepReport) -> String {
         h.push_str(&format!(" {:>16}", e.name));
     }
     h.push_str(&format!(" {:>8}", "total s"));
+    h.push_str(&probe_header(first));
     h
 }
 
@@ -379,6 +458,7 @@ fn dynamics_row(r: &StepReport) -> String {
         s.push_str(&format!(" {:>16.4e}", e.value));
     }
     s.push_str(&format!(" {:>8.4}", r.timings.total));
+    s.push_str(&probe_cells(r));
     s
 }
 
@@ -398,6 +478,9 @@ fn header(first: Option<&StepReport>) -> String {
         " {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>8}",
         "map s", "pat s", "asm s", "fact s", "solve s", "cond s", "upd s", "total s"
     ));
+    if let Some(r) = first {
+        h.push_str(&probe_header(r));
+    }
     h
 }
 
@@ -446,6 +529,7 @@ fn row(r: &StepReport) -> String {
         " {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>8.4}",
         t.mapping, t.pattern, t.assembly, t.factorisation, t.solve, t.condition, t.update, t.total
     ));
+    s.push_str(&probe_cells(r));
     s
 }
 
@@ -486,14 +570,19 @@ impl Observer for Table {
     }
 }
 
-fn run(
-    path: &Path,
-    record: Option<&Path>,
-    force: bool,
-    cadence: &RecordArgs,
-    quiet: bool,
-    limits: &Limits,
-) -> Result<ExitCode> {
+fn run(args: &RunArgs) -> Result<ExitCode> {
+    let (path, record, force, cadence, quiet) = (
+        args.scene.as_path(),
+        args.record.as_deref(),
+        args.force,
+        &args.cadence,
+        args.quiet,
+    );
+    let limits = &limits(args.max_memory);
+    if force && record.is_none() && args.csv.is_none() {
+        eprintln!("error: --force needs --record FILE or --csv FILE");
+        return Ok(ExitCode::from(2));
+    }
     if record.is_none() && cadence.given() {
         eprintln!("error: --record-every, --record-dt and --record-fields need --record FILE");
         return Ok(ExitCode::from(2));
@@ -504,9 +593,42 @@ fn run(
             return Ok(ExitCode::from(2));
         }
     }
+    if let Some(c) = &args.csv {
+        let ours = |m: &[u8]| m.starts_with(b"step,");
+        if let Err(e) = check_output_target("--csv", c, Some(path), force, "a step table", "run.csv", ours) {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+        if record.is_some_and(|r| r == c.as_path()) {
+            eprintln!("error: --csv and --record name the same file");
+            return Ok(ExitCode::from(2));
+        }
+    }
     let (mut sim, text) = match load(path, limits) {
         Ok(s) => s,
         Err(code) => return Ok(code),
+    };
+    if let Some(file) = &args.resume {
+        match sim.resume_from(file, &text) {
+            Ok(step) => out!("resumed from {} at step {step}", file.display()),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(2));
+            }
+        }
+    }
+    let mut checkpoints = match &args.checkpoint {
+        Some(dir) => {
+            let every = args.checkpoint_every.map_or(usize::MAX, |n| n as usize);
+            match mpmlab::checkpoint::Checkpointer::create(dir, every, &text) {
+                Ok(c) => Some(c),
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return Ok(ExitCode::from(3));
+                }
+            }
+        }
+        None => None,
     };
     let settings = match cadence.settings(&sim) {
         Ok(s) => s,
@@ -517,7 +639,25 @@ fn run(
     };
     let mut recorder = match record {
         Some(p) => match Recorder::create_with(p, &text, &sim, false, settings) {
-            Ok(r) => Some(r),
+            Ok(r) => {
+                if let Some(f) = &args.resume {
+                    let _ = r.event(
+                        &format!("resumed from checkpoint {} at step {}", f.display(), sim.step_index()),
+                        "INFO",
+                    );
+                }
+                Some(r)
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(ExitCode::from(3));
+            }
+        },
+        None => None,
+    };
+    let mut csv = match &args.csv {
+        Some(p) => match mpmlab::csv::CsvWriter::create(p, &sim) {
+            Ok(w) => Some(w),
             Err(e) => {
                 eprintln!("error: {e}");
                 return Ok(ExitCode::from(3));
@@ -526,14 +666,18 @@ fn run(
         None => None,
     };
     let m = sim.model();
+    let u = m.units;
     out!(
-        "scene `{}`: grid {}x{} h={}, {} points, {} load steps",
+        "scene `{}`: grid {}x{} h={} {}, {} points, {} {} steps; {}",
         m.name,
         m.grid.nx,
         m.grid.ny,
         m.grid.h,
+        u.of(Quantity::Length),
         sim.points().len(),
-        m.analysis.load_steps
+        m.analysis.load_steps,
+        if sim.time().is_some() { "time" } else { "load" },
+        u.describe()
     );
     let mut code = ExitCode::SUCCESS;
     let mut table = Table {
@@ -547,9 +691,14 @@ fn run(
     // and close the recording; a second one ends the process at once.
     let stop = mpmlab::runner::stop_on_signals();
     let mut detached = Vec::new();
-    let end = mpmlab::runner::run(&mut sim, &mut [&mut table, &mut recorder], &stop, &mut detached);
+    let end = mpmlab::runner::run(
+        &mut sim,
+        &mut [&mut table, &mut recorder, &mut csv, &mut checkpoints],
+        &stop,
+        &mut detached,
+    );
     for d in &detached {
-        eprintln!("error: {d}; continuing without recording");
+        eprintln!("error: {d}; continuing without it");
         code = ExitCode::from(3);
     }
     match end {
@@ -559,6 +708,13 @@ fn run(
             code = ExitCode::from(1);
         }
         RunEnd::Stopped { after } => {
+            // The last good state, to resume from.
+            if let Some(c) = checkpoints.as_mut() {
+                match c.write(&sim) {
+                    Ok(p) => eprintln!("checkpoint of step {after}: {}", p.display()),
+                    Err(e) => eprintln!("error: {e}"),
+                }
+            }
             let text = format!("interrupted after step {after}: the run stops here");
             eprintln!("{text}");
             if let Some(rec) = recorder.as_mut() {
@@ -568,6 +724,7 @@ fn run(
         }
     }
     let (last, total_time, phases) = (table.last, table.total_time, table.phases);
+    let (en, force, len) = (u.of(Quantity::Energy), u.of(Quantity::Force), u.of(Quantity::Length));
     let cutbacks = table.cutbacks;
     if let Some(r) = &last {
         let errs: Vec<String> = r
@@ -576,7 +733,7 @@ fn run(
             .map(|e| format!("{} = {:.4e}", e.name, e.value))
             .collect();
         out!(
-            "summary: {}/{} steps, {:.3} s in steps, final strain energy {:.6e} J, work {:.6e} J{}{}",
+            "summary: {}/{} steps, {:.3} s in steps, final strain energy {:.6e} {en}, work {:.6e} {en}{}{}",
             sim.step_index(),
             sim.load_steps(),
             total_time,
@@ -613,7 +770,7 @@ fn run(
     }
     if let Some((r, d)) = last.as_ref().and_then(|r| r.dynamics.as_ref().map(|d| (r, d))) {
         out!(
-            "dynamics: t = {:.6} s, kinetic {:.6e} J, strain {:.6e} J, plastic {:.6e} J, initial {:.6e} J, balance error {:.3e} J, momentum ({:.6e}, {:.6e}) kg m/s",
+            "dynamics: t = {:.6} s, kinetic {:.6e} {en}, strain {:.6e} {en}, plastic {:.6e} {en}, initial {:.6e} {en}, balance error {:.3e} {en}, momentum ({:.6e}, {:.6e}) {}",
             d.time,
             r.energy.kinetic,
             r.energy.strain,
@@ -621,13 +778,14 @@ fn run(
             d.initial_energy,
             d.energy_error,
             d.momentum[0],
-            d.momentum[1]
+            d.momentum[1],
+            u.of(Quantity::Momentum)
         );
     }
     if let Some(r) = &last {
         for b in &r.ibm {
             out!(
-                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) N, violation {:.2e} m (rms {:.2e} m), {} cells cut",
+                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) {force}, violation {:.2e} {len} (rms {:.2e} {len}), {} cells cut",
                 b.name,
                 r.step,
                 b.reaction[0],
@@ -639,17 +797,41 @@ fn run(
         }
         for b in &r.boundaries {
             out!(
-                "boundary `{}` (start of step {}): length {:.6} m{}, {} cells cut, traction resultant ({:.6e}, {:.6e}) N{}",
+                "boundary `{}` (start of step {}): length {:.6} {len}{}, {} cells cut, traction resultant ({:.6e}, {:.6e}) {force}{}",
                 b.name,
                 r.step,
                 b.length,
-                b.area.map_or(String::new(), |a| format!(", area {a:.6} m^2")),
+                b.area.map_or(String::new(), |a| format!(", area {a:.6} {}", u.of(Quantity::Area))),
                 b.cells_cut,
                 b.resultant[0],
                 b.resultant[1],
-                if b.lost > 0.0 { format!(", LOST {:.3e} N on inactive nodes", b.lost) } else { String::new() }
+                if b.lost > 0.0 { format!(", LOST {:.3e} {force} on inactive nodes", b.lost) } else { String::new() }
             );
         }
+    }
+    if let Some(r) = &last {
+        for p in &r.probes {
+            let cols: Vec<String> = p
+                .columns()
+                .iter()
+                .map(|(k, q, v)| format!("{k} {v:.6e} {}", u.of(*q)))
+                .collect();
+            out!("probe `{}` (step {}): {}", p.name, r.step, cols.join(", "));
+        }
+    }
+    if let (Some(c), Some(dir)) = (&checkpoints, &args.checkpoint) {
+        if let Some(step) = c.last() {
+            let f = dir.join(mpmlab::checkpoint::file_name(step));
+            out!(
+                "checkpoint: {} (resume: mpmlab run {} --resume {})",
+                f.display(),
+                path.display(),
+                f.display()
+            );
+        }
+    }
+    if let Some(c) = &csv {
+        out!("step table: {}", c.path().display());
     }
     if let Some(mut rec) = recorder {
         let p = rec.path().display().to_string();
@@ -998,14 +1180,19 @@ fn tui(
     force: bool,
     cadence: &RecordArgs,
     limits: &Limits,
+    resume: Option<&Path>,
 ) -> Result<ExitCode> {
+    if resume.is_some() && scene.is_none() {
+        eprintln!("error: --resume needs the scene file the checkpoint was written for");
+        return Ok(ExitCode::from(2));
+    }
     if let Some(r) = &record {
         if let Err(e) = check_record_target(r, scene, force) {
             eprintln!("error: {e}");
             return Ok(ExitCode::from(2));
         }
     }
-    let (sim, text) = match scene {
+    let (mut sim, text) = match scene {
         Some(p) => match load(p, limits) {
             Ok(s) => s,
             Err(code) => return Ok(code),
@@ -1034,6 +1221,12 @@ fn tui(
             }
         },
     };
+    if let Some(file) = resume {
+        if let Err(e) = sim.resume_from(file, &text) {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    }
     let recorder = if no_record {
         None
     } else {
@@ -1050,7 +1243,19 @@ fn tui(
             }
         };
         match Recorder::create_with(&path, &text, &sim, false, settings) {
-            Ok(r) => Some(r),
+            Ok(r) => {
+                if let Some(f) = resume {
+                    let _ = r.event(
+                        &format!(
+                            "resumed from checkpoint {} at step {}: this recording is a branch from there",
+                            f.display(),
+                            sim.step_index()
+                        ),
+                        "INFO",
+                    );
+                }
+                Some(r)
+            }
             Err(e) => {
                 eprintln!("error: {e}");
                 return Ok(ExitCode::from(3));
@@ -1058,7 +1263,7 @@ fn tui(
         }
     };
     let path = recorder.as_ref().map(|r| r.path().display().to_string());
-    mpmlab::tui::run(sim, recorder).context("terminal UI")?;
+    mpmlab::tui::run(sim, text, recorder).context("terminal UI")?;
     if let Some(p) = path {
         out!("recording: {p}  (replay: rerun {p})");
     }

@@ -684,6 +684,7 @@ fn increment(
             cutbacks: Vec::new(),
             substeps: 1,
         }),
+        probes: Vec::new(),
     })
 }
 

@@ -3,7 +3,7 @@
 use crate::geometry::P2;
 
 /// All material points of a model. Index `p` runs over every array.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Points {
     /// Current position (m).
     pub x: Vec<P2>,

@@ -107,6 +107,8 @@ pub struct StepReport {
     /// Implicit steps: which factorisation solved the last system, the
     /// inertia of the last tangent, and the load-step cutbacks taken.
     pub solver: Option<SolverReport>,
+    /// The scene's probes at the end of the step ([`crate::probe`]).
+    pub probes: Vec<crate::probe::ProbeValue>,
 }
 
 /// How an implicit step's systems were solved.

@@ -44,11 +44,13 @@ impl Simulation {
                 steps: self.load_steps(),
             });
         }
-        match self.model.analysis.kind {
+        let mut report = match self.model.analysis.kind {
             crate::scene::AnalysisKind::QuasiStaticLinear => crate::linear::linear_step(self),
             crate::scene::AnalysisKind::QuasiStaticFinite => crate::newton::finite_step(self),
             crate::scene::AnalysisKind::ExplicitDynamics => crate::dynamics::explicit_step(self),
-        }
+        }?;
+        report.probes = self.probe_values(Some(&report));
+        Ok(report)
     }
 
     /// Largest relative difference between the assembled finite-deformation

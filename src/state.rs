@@ -13,7 +13,7 @@ pub use crate::report::{Energy, Progress, ProgressHook, StepFailure, StepReport,
 use crate::scene::ConditionMode;
 
 /// Settings that may change between steps.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Params {
     /// Largest accepted relative residual (see [`crate::scene::AnalysisSpec::tolerance`]).
     pub tolerance: f64,
@@ -30,8 +30,9 @@ pub struct Params {
     pub gamma_m: f64,
 }
 
-/// The evolving part of a simulation.
-#[derive(Clone, Debug)]
+/// The evolving part of a simulation (what a checkpoint keeps,
+/// [`crate::checkpoint`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub(crate) struct State {
     pub(crate) points: Points,
     pub(crate) step: usize,

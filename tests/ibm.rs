@@ -164,6 +164,7 @@ fn deep_beam_a(n: usize, h: f64, fe: bool) -> f64 {
         s.bodies[0].points_per_cell = n;
         if fe {
             s.ibm.clear();
+            s.probes.retain(|p| p.ibm.is_none());
             s.bodies[0].placement = mpmlab::scene::Placement::Gauss;
             s.bodies[0].points_per_cell = 2;
             s.dirichlet.push(mpmlab::scene::DirichletSpec {
@@ -462,6 +463,7 @@ fn energy_balance_with_implicit_and_grid_constraints() {
     // constraints' reactions and the implicit one's both work, each once.
     let mut sim = sim_with("block-roller-0", |s| {
         s.ibm.truncate(1);
+        s.probes.retain(|p| p.ibm.is_none());
         let grid_roller = |x: Option<f64>, y: Option<f64>, u: f64| {
             let text = match (x, y) {
                 (Some(x), _) => format!("kind = \"roller\"\nx = {x}\nnormal_displacement = {u}"),
@@ -820,6 +822,7 @@ fn finite_cantilever_curve(angle: u32, h: f64, grid_clamp: bool) -> Vec<f64> {
     tip_curve(&format!("slender-cantilever-finite-{angle}"), angle, h, |s| {
         if grid_clamp {
             s.ibm.clear();
+            s.probes.retain(|p| p.ibm.is_none());
             s.dirichlet.push(mpmlab::scene::DirichletSpec {
                 kind: mpmlab::scene::DirichletKind::Fixed,
                 x: Some(0.0),

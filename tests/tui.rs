@@ -175,7 +175,8 @@ fn dynamics_screen_shows_time_energies_and_runs_on() {
         "{}",
         lines[0]
     );
-    assert!(all.contains("energy (J) against time"), "{all}");
+    // SI, per unit thickness.
+    assert!(all.contains("energy (J/m) against time"), "{all}");
     assert!(all.contains("kinetic 2.13"), "{all}");
     assert!(all.contains("gamma_M 2.500e2"), "{all}");
     // gamma_M changes in decades and reaches the engine as a command.
@@ -261,7 +262,8 @@ fn charts_fields_zoom_and_quit_confirmation() {
     }
     assert_eq!(app.view.field, mpmlab::field::Field::Error);
     assert!(app.view.values.iter().all(|v| v.is_finite() && *v >= 0.0));
-    assert!(screen(&app).join("\n").contains("error vs exact"));
+    // The column's exact solution gives displacements: the error is one, in m.
+    assert!(screen(&app).join("\n").contains("|u - u_exact| (m)"));
     // Layers: active cells drawn in blue only when asked.
     let blue = |app: &App| {
         let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
@@ -522,4 +524,58 @@ fn gamma_k_steps_from_a_scale_even_for_stress_free_scenes() {
     let g0 = app.params.gamma_m;
     app.apply(Action::RaiseGammaM);
     assert_eq!(app.apply(Action::RaiseGammaM), Some(Command::SetGammaM(100.0 * g0)));
+}
+
+/// A probe's values in the last-step panel and its chart (load against
+/// settlement for the footing), at both sizes; labels in the scene's units.
+#[test]
+fn probe_panel_and_chart_at_two_sizes() {
+    let mut sim = sim_with("rigid-footing", |_| {});
+    let mut app = App::new(&sim, None);
+    for _ in 0..3 {
+        let r = sim.step().unwrap();
+        app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    }
+    // v reaches the probe chart after the errors; it starts on the
+    // footing's force against its displacement.
+    for _ in 0..4 {
+        app.apply(Action::NextChart);
+    }
+    assert_eq!(app.chart, mpmlab::tui::app::ChartKind::Probe);
+    let cols = app.probe_columns();
+    assert_eq!(cols[app.probe_y].0, "footing:fy", "{cols:?}");
+    assert_eq!(cols[app.probe_x].0, "footing:uy", "{cols:?}");
+    let r = sim.probe_values(None);
+    let series = app.probe_series(app.probe_x);
+    // The start and three steps; the last is the engine's value.
+    assert_eq!(series.len(), 4);
+    assert_eq!(series[3], r[0].u[1]);
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let rows = screen_at(&app, w, h);
+        let all = rows.join("\n");
+        assert!(all.contains("probe footing: u ("), "{w}x{h}\n{all}");
+        assert!(
+            all.contains("footing:fy (N/m) against footing:uy (m)"),
+            "{w}x{h}\n{all}"
+        );
+        // The curve is drawn: braille dots in the chart's rows.
+        let chart = rows.iter().position(|l| l.contains("against footing:uy")).unwrap();
+        let dots: usize = rows[chart + 1..chart + 6].iter().map(|l| braille(l)).sum();
+        assert!(dots > 5, "{w}x{h}\n{all}");
+    }
+}
+
+/// A scene in mm, N, MPa is labelled so: stresses in MPa, forces per unit
+/// thickness in N/mm.
+#[test]
+fn labels_in_the_scene_units() {
+    let mut sim = sim_with("block-roller-0", |_| {});
+    let mut app = App::new(&sim, None);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    let all = screen_at(&app, 160, 48).join("\n");
+    for part in ["sigma_yy (MPa)", "N/mm", "N mm/mm", "probe top: u ("] {
+        assert!(all.contains(part), "{part}\n{all}");
+    }
+    assert!(!all.contains("(Pa)") && !all.contains(" J "), "{all}");
 }

@@ -4,6 +4,8 @@
 
 mod values;
 
+use crate::units::{Quantity, Units};
+
 /// A scalar per point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Field {
@@ -35,15 +37,31 @@ impl Field {
         Field::Error,
     ];
 
-    pub fn label(self) -> &'static str {
-        match self {
-            Field::SigmaXx => "sigma_xx (Pa)",
-            Field::SigmaYy => "sigma_yy (Pa)",
-            Field::SigmaXy => "sigma_xy (Pa)",
-            Field::DisplacementMagnitude => "|u| (m)",
+    /// The field's name with its unit in `units`. The error is a
+    /// displacement where the scene's exact solution gives one
+    /// (`exact_displacement`), else a stress.
+    pub fn label(self, units: Units, exact_displacement: bool) -> String {
+        let q = match self {
+            Field::SigmaXx | Field::SigmaYy | Field::SigmaXy => Some(Quantity::Stress),
+            Field::DisplacementMagnitude => Some(Quantity::Length),
+            Field::PlasticStrain => None,
+            Field::Speed => Some(Quantity::Velocity),
+            Field::Error if exact_displacement => Some(Quantity::Length),
+            Field::Error => Some(Quantity::Stress),
+        };
+        let name = match self {
+            Field::SigmaXx => "sigma_xx",
+            Field::SigmaYy => "sigma_yy",
+            Field::SigmaXy => "sigma_xy",
+            Field::DisplacementMagnitude => "|u|",
             Field::PlasticStrain => "plastic strain",
-            Field::Speed => "|v| (m/s)",
-            Field::Error => "error vs exact",
+            Field::Speed => "|v|",
+            Field::Error if exact_displacement => "|u - u_exact|",
+            Field::Error => "|s_yy - s_yy,exact|",
+        };
+        match q {
+            Some(q) => units.label(name, q),
+            None => name.to_string(),
         }
     }
 

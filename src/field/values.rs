@@ -33,6 +33,27 @@ impl Field {
     }
 }
 
+impl Field {
+    /// The field's label in the scene's units ([`Field::label`]).
+    pub fn label_for(self, sim: &Simulation) -> String {
+        self.label(sim.model().units, exact_gives_displacement(sim))
+    }
+}
+
+/// Whether the scene's exact solution gives a displacement (the error
+/// field is then `|u - u_exact|`, else `|s_yy - s_yy,exact|`).
+fn exact_gives_displacement(sim: &Simulation) -> bool {
+    use crate::exact::ExactSolution;
+    match &sim.model().exact {
+        None | Some(ExactSolution::FreeMotion { .. }) => true,
+        Some(e) => sim
+            .points()
+            .x0
+            .first()
+            .is_none_or(|&x| e.fields(x, 1.0).1.iter().all(|v| v.is_finite())),
+    }
+}
+
 /// Per point error against the exact solution at the current load factor.
 fn error_values(sim: &Simulation) -> Vec<f64> {
     use crate::exact::ExactSolution;

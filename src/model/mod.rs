@@ -8,6 +8,7 @@ mod exact;
 mod ibm;
 mod limits;
 mod materials;
+mod probes;
 pub mod record;
 
 use boundaries::build_boundary;
@@ -72,6 +73,8 @@ pub struct PointLoad {
 pub struct Model {
     pub name: String,
     pub description: String,
+    /// The unit system of the scene's numbers (for labels).
+    pub units: crate::units::Units,
     pub grid: Grid,
     pub materials: Vec<Material>,
     pub bodies: Vec<Body>,
@@ -90,6 +93,8 @@ pub struct Model {
     pub exact: Option<ExactSolution>,
     /// What a recording of a run holds (`[record]`).
     pub record: record::RecordSettings,
+    /// Quantities followed through the run (`[[probe]]`).
+    pub probes: Vec<crate::probe::Probe>,
 }
 
 /// Largest grid the engine will build (cells).
@@ -298,10 +303,12 @@ impl Model {
         }
         let ibm = ibm::build(scene, &grid, &a, &boundaries, &points, &regions, exact.as_ref())?;
         let record = record::build(&scene.record, a.kind)?;
+        let probes = probes::build(scene, &points, &boundaries, &ibm)?;
 
         Ok(Model {
             name: scene.scene.name.clone(),
             description: scene.scene.description.trim().to_string(),
+            units: scene.scene.units,
             grid,
             materials,
             bodies,
@@ -314,6 +321,7 @@ impl Model {
             analysis: a,
             exact,
             record,
+            probes,
         })
     }
 }

@@ -26,6 +26,7 @@
 //! | `metrics/log10/residual`, `metrics/log10/condition/stiffness` | Scalars | as above |
 //! | `metrics/energy/strain`, `metrics/energy/external_work` | Scalars | every step |
 //! | `metrics/error/<measure>` | Scalars | every step with an exact solution |
+//! | `metrics/probe/<name>/{ux,uy,sxx,syy,sxy,fx,fy}` | Scalars (the scene's `[[probe]]`s, [`crate::probe`]) | every step |
 //! | `metrics/time/<phase>` | Scalars (s) | every step |
 //! | `metrics/unknowns` | Scalars | every step |
 //! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics; also on `time`) | every step |
@@ -593,6 +594,11 @@ impl Recorder {
         self.scalar("metrics/energy/external_work", report.energy.external_work)?;
         for e in &report.errors {
             self.scalar(&format!("metrics/error/{}", e.name), e.value)?;
+        }
+        for p in &report.probes {
+            for (k, _, v) in p.columns() {
+                self.scalar(&format!("metrics/probe/{}/{k}", p.name), v)?;
+            }
         }
         let t = &report.timings;
         for (name, v) in [

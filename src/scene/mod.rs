@@ -43,6 +43,24 @@ pub struct Scene {
     pub exact: Option<ExactSpec>,
     #[serde(default)]
     pub record: RecordSpec,
+    #[serde(default, rename = "probe")]
+    pub probes: Vec<ProbeSpec>,
+}
+
+/// `[[probe]]`: a named quantity followed through the run (see
+/// [`crate::probe`]). Give exactly one of `at` (the material point nearest
+/// this position at the start), `boundary` (a `[[boundary]]`'s name) or
+/// `ibm` (an `[[ibm]]`'s name).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSpec {
+    pub name: String,
+    #[serde(default)]
+    pub at: Option<[f64; 2]>,
+    #[serde(default)]
+    pub boundary: Option<String>,
+    #[serde(default)]
+    pub ibm: Option<String>,
 }
 
 /// `[record]`: what the run's recording holds (checked in
@@ -88,6 +106,11 @@ pub struct SceneMeta {
     pub name: String,
     #[serde(default)]
     pub description: String,
+    /// The unit system the scene's numbers are in (labels only; the
+    /// engine needs consistent units): `"SI"` (default), `"mm-N-MPa"`,
+    /// `"m-kN-kPa"`.
+    #[serde(default)]
+    pub units: crate::units::Units,
 }
 
 /// `[grid]`: lower-left `origin` (m), `size` = extent (m), cell size `h` (m).
@@ -453,7 +476,7 @@ pub enum VelocityUpdate {
 }
 
 /// How condition numbers are computed each step.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ConditionMode {
     /// Dense eigenvalues up to `dense_limit` unknowns, Lanczos above.

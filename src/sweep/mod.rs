@@ -298,6 +298,9 @@ pub struct RunResult {
     pub condition: f64,
     /// Errors against the exact solution after the last completed step.
     pub errors: Vec<(String, f64)>,
+    /// The scene's probes after the last completed step, as
+    /// `(<name>:<key>, value)` (columns `probe:<name>:<key>`).
+    pub probes: Vec<(String, f64)>,
     /// The run's recording (`sweep --record`): bytes, bytes per step and
     /// per point per step holding points (columns only when recorded).
     pub record_bytes: u64,
@@ -400,6 +403,11 @@ impl Observer for RunResult {
         self.iterations += rep.iterations.max(1);
         self.condition = rep.condition.map_or(f64::NAN, |c| c.value);
         self.errors = rep.errors.iter().map(|e| (e.name.to_string(), e.value)).collect();
+        self.probes = rep
+            .probes
+            .iter()
+            .flat_map(|p| p.columns().into_iter().map(|(k, _, v)| (format!("{}:{k}", p.name), v)))
+            .collect();
         self.steps_done = rep.step;
         None
     }
@@ -475,6 +483,9 @@ impl RunResult {
         for (n, v) in &self.errors {
             f.push((format!("error:{n}"), num(*v)));
         }
+        for (n, v) in &self.probes {
+            f.push((format!("probe:{n}"), num(*v)));
+        }
         if self.record_bytes > 0 {
             let vals = [
                 self.record_bytes.to_string(),
@@ -522,6 +533,11 @@ impl RunResult {
             errors: order
                 .iter()
                 .filter_map(|c| c.strip_prefix("error:").map(|k| (k.to_string(), x(c))))
+                .filter(|(_, v)| !v.is_nan())
+                .collect(),
+            probes: order
+                .iter()
+                .filter_map(|c| c.strip_prefix("probe:").map(|k| (k.to_string(), x(c))))
                 .filter(|(_, v)| !v.is_nan())
                 .collect(),
             record_bytes: s("record_bytes").parse().unwrap_or(0),
@@ -608,6 +624,8 @@ pub fn to_csv(results: &[RunResult]) -> String {
             1
         } else if c.starts_with("error:") {
             3
+        } else if c.starts_with("probe:") {
+            4
         } else {
             2
         }

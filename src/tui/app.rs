@@ -17,6 +17,8 @@ pub struct View {
     /// The colour field at every point.
     pub values: Vec<f64>,
     pub field: Field,
+    /// The field's name and unit.
+    pub label: String,
     pub active_cells: Vec<usize>,
     pub boundaries: Vec<BoundaryView>,
     /// Faces carrying ghost stabilisation in the last step.
@@ -73,6 +75,7 @@ impl View {
             positions: sim.points().x.clone(),
             values: field.values(sim),
             field,
+            label: field.label_for(sim),
             active_cells: sim.active_cells().to_vec(),
             boundaries: BoundaryView::all(sim),
             ghost_faces: sim.ghost_faces().to_vec(),
@@ -117,6 +120,11 @@ pub enum Action {
     PanUp,
     PanDown,
     ResetView,
+    /// The probe chart's next y (`p`) or x (`P`) quantity.
+    NextProbeY,
+    NextProbeX,
+    /// Write a checkpoint of the state after the last step.
+    Checkpoint,
     /// Next chart: residuals, condition numbers, energies, errors.
     NextChart,
     /// Show or hide the grid lines, the active cells, the ghost faces.
@@ -161,6 +169,8 @@ pub enum Command {
     /// Stop the step being computed (handled by the UI loop through a flag
     /// the engine's progress hook reads).
     Cancel,
+    /// Write a checkpoint of the current state (`checkpoints/`).
+    Checkpoint,
     Quit,
 }
 
@@ -175,6 +185,9 @@ pub enum ChartKind {
     Energy,
     /// Errors against the exact solution per step (log10).
     Error,
+    /// One probe quantity against another (or the load factor): a
+    /// load–displacement curve (`p`/`P` choose y and x).
+    Probe,
 }
 
 impl ChartKind {
@@ -183,7 +196,8 @@ impl ChartKind {
             ChartKind::Residual => ChartKind::Condition,
             ChartKind::Condition => ChartKind::Energy,
             ChartKind::Energy => ChartKind::Error,
-            ChartKind::Error => ChartKind::Residual,
+            ChartKind::Error => ChartKind::Probe,
+            ChartKind::Probe => ChartKind::Residual,
         }
     }
 }
@@ -192,6 +206,8 @@ impl ChartKind {
 pub struct App {
     pub scene_name: String,
     pub description: String,
+    /// The scene's unit system (labels).
+    pub units: crate::units::Units,
     pub grid: Grid,
     pub points: usize,
     pub view: View,
@@ -234,6 +250,11 @@ pub struct App {
     pub show_grid: bool,
     pub show_active: bool,
     pub show_ghost_faces: bool,
+    /// The probes at the start (the probe chart's first point).
+    pub probes_start: Vec<crate::probe::ProbeValue>,
+    /// The probe chart's axes: indices into [`App::probe_columns`].
+    pub probe_x: usize,
+    pub probe_y: usize,
 }
 
 /// A step's outcome.
@@ -244,6 +265,7 @@ impl App {
         App {
             scene_name: sim.model().name.clone(),
             description: sim.model().description.clone(),
+            units: sim.model().units,
             grid: sim.model().grid.clone(),
             points: sim.points().len(),
             view: View::of(sim, Field::SigmaYy),
@@ -279,7 +301,63 @@ impl App {
             show_grid: true,
             show_active: false,
             show_ghost_faces: true,
+            probes_start: Vec::new(),
+            probe_x: 0,
+            probe_y: 0,
         }
+        .with_probes(sim.probe_values(None))
+    }
+
+    /// Start the probe chart on the probes' initial values: a force
+    /// against its displacement where a probe has one (a footing's load
+    /// against its settlement), else the first displacement against the
+    /// load factor.
+    fn with_probes(mut self, start: Vec<crate::probe::ProbeValue>) -> App {
+        self.probes_start = start;
+        let cols = self.probe_columns();
+        let find = |key: &str| cols.iter().position(|c| c.0.ends_with(key));
+        (self.probe_x, self.probe_y) = match (find(":fy"), find(":uy")) {
+            (Some(f), _) => (f.saturating_sub(2).max(1), f),
+            (None, Some(u)) => (0, u),
+            (None, None) => (0, 0),
+        };
+        self
+    }
+
+    /// The quantities the probe chart can show: the load factor (or time)
+    /// first, then every probe's `(name:key, label with unit)`.
+    pub fn probe_columns(&self) -> Vec<(String, String)> {
+        let mut c = vec![match self.view.time {
+            Some(_) => ("time".to_string(), "time (s)".to_string()),
+            None => ("load factor".to_string(), "load factor".to_string()),
+        }];
+        for p in &self.probes_start {
+            for (k, q, _) in p.columns() {
+                let name = format!("{}:{k}", p.name);
+                c.push((name.clone(), self.units.label(&name, q)));
+            }
+        }
+        c
+    }
+
+    /// Column `col` of [`App::probe_columns`] at the start and after each step.
+    pub fn probe_series(&self, col: usize) -> Vec<f64> {
+        let value = |probes: &[crate::probe::ProbeValue], lambda: f64| {
+            if col == 0 {
+                return lambda;
+            }
+            probes
+                .iter()
+                .flat_map(|p| p.columns().into_iter().map(|c| c.2))
+                .nth(col - 1)
+                .unwrap_or(f64::NAN)
+        };
+        std::iter::once(value(&self.probes_start, 0.0))
+            .chain(self.reports.iter().map(|r| {
+                let x = r.dynamics.as_ref().map_or(r.load_factor, |d| d.time);
+                value(&r.probes, x)
+            }))
+            .collect()
     }
 
     /// The next step while running continuously (stops at the end or at a failure).
@@ -506,6 +584,30 @@ impl App {
             }
             Action::NextChart => {
                 self.chart = self.chart.next();
+                if self.chart == ChartKind::Probe && self.probes_start.is_empty() {
+                    self.chart = self.chart.next();
+                }
+                None
+            }
+            Action::Checkpoint => {
+                if self.busy {
+                    self.status = "a step is running: checkpoint after it".into();
+                    None
+                } else {
+                    Some(Command::Checkpoint)
+                }
+            }
+            Action::NextProbeY | Action::NextProbeX => {
+                let n = self.probe_columns().len();
+                let axis = if action == Action::NextProbeY {
+                    &mut self.probe_y
+                } else {
+                    &mut self.probe_x
+                };
+                *axis = (*axis + 1) % n;
+                if !self.probes_start.is_empty() {
+                    self.chart = ChartKind::Probe;
+                }
                 None
             }
             Action::NextField => {

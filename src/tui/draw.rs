@@ -3,6 +3,7 @@
 use super::app::{App, ChartKind};
 use crate::colormap;
 use crate::simulation::{StepFailure, StepReport};
+use crate::units::{Quantity, Units};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
@@ -40,10 +41,12 @@ pub fn draw(frame: &mut Frame, app: &App) {
     );
     let [canvas, side] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
     draw_canvas(frame, app, canvas);
+    // Taller terminals give the last step and the chart more rows.
+    let extra = side.height.saturating_sub(28);
     let [params, last, chart, table] = Layout::vertical([
         Constraint::Length(3),
-        Constraint::Length(12),
-        Constraint::Length(9),
+        Constraint::Length(12 + extra / 2),
+        Constraint::Length(9 + extra / 4),
         Constraint::Min(3),
     ])
     .areas(side);
@@ -51,6 +54,7 @@ pub fn draw(frame: &mut Frame, app: &App) {
     draw_last_step(frame, app, last);
     match app.chart {
         ChartKind::Residual => draw_residuals(frame, app, chart),
+        ChartKind::Probe => draw_probes(frame, app, chart),
         ChartKind::Energy if app.view.time.is_some() => draw_energies(frame, app, chart),
         kind => draw_per_step(frame, app, chart, kind),
     }
@@ -226,7 +230,7 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
         0.5 * (g.origin[1] + max[1]) + app.pan[1],
     );
     let (hw, hh) = (0.5 * scale * inner.0 / app.zoom, 0.5 * scale * inner.1 / app.zoom);
-    let legend = format!(" {} ", colormap::legend(app.view.field.label(), lo, hi));
+    let legend = format!(" {} ", colormap::legend(&app.view.label, lo, hi));
     let canvas = Canvas::default()
         .block(
             Block::default()
@@ -406,6 +410,48 @@ fn draw_residuals(frame: &mut Frame, app: &App, area: Rect) {
     frame.render_widget(chart, area);
 }
 
+/// One probe quantity against another ([`App::probe_columns`]), from the
+/// initial state to the last step, with a marker at the last point.
+fn draw_probes(frame: &mut Frame, app: &App, area: Rect) {
+    let cols = app.probe_columns();
+    let (xc, yc) = (app.probe_x.min(cols.len() - 1), app.probe_y.min(cols.len() - 1));
+    let data: Vec<(f64, f64)> = app
+        .probe_series(xc)
+        .into_iter()
+        .zip(app.probe_series(yc))
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    let bounds = |v: &mut dyn Iterator<Item = f64>| {
+        let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        if !(lo <= hi) {
+            [0.0, 1.0]
+        } else if hi > lo {
+            [lo, hi]
+        } else {
+            [lo - 0.5 * lo.abs().max(1e-30), hi + 0.5 * hi.abs().max(1e-30)]
+        }
+    };
+    let xb = bounds(&mut data.iter().map(|p| p.0));
+    let yb = bounds(&mut data.iter().map(|p| p.1));
+    let last: Vec<(f64, f64)> = data.last().copied().into_iter().collect();
+    let datasets = vec![
+        line("", Color::Cyan, &data),
+        ratatui::widgets::Dataset::default()
+            .marker(Marker::Dot)
+            .graph_type(ratatui::widgets::GraphType::Scatter)
+            .style(Style::new().fg(Color::Yellow))
+            .data(&last),
+    ];
+    let lab = |v: f64| format!("{v:.3e}");
+    let chart = framed(
+        datasets,
+        format!(" {} against {} (p/P) ", cols[yc].1, cols[xc].1),
+        (xb, [lab(xb[0]), lab(xb[1])]),
+        (yb, [lab(yb[0]), lab(yb[1])]),
+    );
+    frame.render_widget(chart, area);
+}
+
 /// A named line series (an empty name shows no legend entry).
 fn line<'a>(name: &str, color: Color, data: &'a [(f64, f64)]) -> ratatui::widgets::Dataset<'a> {
     let d = ratatui::widgets::Dataset::default()
@@ -442,19 +488,20 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
     let colors = [Color::Cyan, Color::Yellow, Color::Red, Color::Green, Color::Magenta];
     /// A named series of `(step, value)`.
     type Series = (String, Vec<(f64, f64)>);
-    let (title, mut series): (&str, Vec<Series>) = match kind {
+    let ghost = app.reports.iter().any(|r| r.condition_unstabilised.is_some());
+    let (title, mut series): (String, Vec<Series>) = match kind {
         ChartKind::Condition => (
-            " condition number per step (log10) ",
+            " condition number per step (log10) ".into(),
             vec![
                 (
-                    "with ghost".into(),
+                    if ghost { "with ghost" } else { "K" }.into(),
                     app.reports
                         .iter()
                         .filter_map(|r| Some((r.step as f64, log(r.condition?.value)?)))
                         .collect(),
                 ),
                 (
-                    "without".into(),
+                    "without ghost".into(),
                     app.reports
                         .iter()
                         .filter_map(|r| Some((r.step as f64, log(r.condition_unstabilised?.value)?)))
@@ -468,7 +515,7 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
                 .last()
                 .map_or(Vec::new(), |r| r.errors.iter().map(|e| e.name).collect());
             (
-                " errors per step (log10) ",
+                " errors per step (log10) ".into(),
                 names
                     .iter()
                     .map(|n| {
@@ -487,7 +534,7 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
             )
         }
         _ => (
-            " energy per step (J) ",
+            format!(" energy per step ({}) ", app.units.of(Quantity::Energy)),
             vec![
                 (
                     "strain".into(),
@@ -586,7 +633,7 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
         .collect();
     let chart = framed(
         datasets,
-        " energy (J) against time (s) ".into(),
+        format!(" energy ({}) against time (s) ", app.units.of(Quantity::Energy)),
         ([0.0, tmax], ["0".into(), format!("{tmax:.3}")]),
         ([0.0, 1.05 * emax], ["0".into(), format!("{:.3e}", 1.05 * emax)]),
     );
@@ -594,19 +641,20 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
 }
 
 /// The explicit-dynamics lines of the last-step panel.
-fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport) -> Vec<Line<'static>> {
+fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units) -> Vec<Line<'static>> {
     let e = &r.energy;
+    let (en, vel) = (u.of(Quantity::Energy), u.of(Quantity::Velocity));
     let mut lines = vec![
         Line::raw(format!(
             "t = {:.4} s (dt {:.2e} s)  {:?} mass, {:?}, {:?}",
             d.time, d.dt, d.mass, d.stress_update, d.velocity_update
         )),
         Line::raw(format!(
-            "energy: kinetic {:.4e}  strain {:.4e}  plastic {:.4e} J",
+            "energy: kinetic {:.4e}  strain {:.4e}  plastic {:.4e} {en}",
             e.kinetic, e.strain, e.plastic_dissipation
         )),
         Line::raw(format!(
-            "balance {:.3e} J ({} of W0 = {:.4e} J)  max grid speed {:.3e} m/s",
+            "balance {:.3e} {en} ({} of W0 = {:.4e} {en})  max grid speed {:.3e} {vel}",
             d.energy_error,
             if d.initial_energy > 0.0 {
                 format!("{:.2e}", d.energy_error / d.initial_energy)
@@ -657,9 +705,10 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
                     "step {}/{}  unknowns {}",
                     r.step, r.load_steps, r.unknowns
                 )));
-                lines.extend(dynamics_lines(r, d));
+                lines.extend(dynamics_lines(r, d, app.units));
+                lines.extend(r.probes.iter().map(|p| Line::raw(probe_line(p, app.units))));
             } else {
-                static_lines(r, &mut lines);
+                static_lines(r, app.units, &mut lines);
             }
             if !r.errors.is_empty() {
                 let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
@@ -673,6 +722,30 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
             .block(Block::default().borders(Borders::ALL).title(" last step ")),
         area,
     );
+}
+
+/// A probe's values on one line: `tip: u (ux, uy) m  s (xx, yy, xy) Pa`.
+fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
+    let mut s = format!(
+        "probe {}: u ({:.3e}, {:.3e}) {}",
+        p.name,
+        p.u[0],
+        p.u[1],
+        u.of(Quantity::Length)
+    );
+    if let Some(t) = p.stress {
+        s.push_str(&format!(
+            "  s ({:.3e}, {:.3e}, {:.3e}) {}",
+            t[0],
+            t[1],
+            t[2],
+            u.of(Quantity::Stress)
+        ));
+    }
+    if let Some(f) = p.force {
+        s.push_str(&format!("  F ({:.3e}, {:.3e}) {}", f[0], f[1], u.of(Quantity::Force)));
+    }
+    s
 }
 
 /// The factorisation of the step's last system and the tangent's inertia,
@@ -693,7 +766,8 @@ fn solver_label(s: &crate::report::SolverReport) -> String {
 
 /// The quasi-static lines of the last-step panel: residuals, condition
 /// number, energies, timings, boundaries.
-fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
+fn static_lines(r: &StepReport, u: Units, lines: &mut Vec<Line<'static>>) {
+    let (force, len, en) = (u.of(Quantity::Force), u.of(Quantity::Length), u.of(Quantity::Energy));
     let res: Vec<String> = r.residuals.iter().map(|x| format!("{x:.2e}")).collect();
     lines.push(Line::raw(format!(
         "step {}/{}  load factor {:.3}  unknowns {}  {}",
@@ -704,7 +778,7 @@ fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
         r.solver.as_ref().map_or(String::new(), solver_label)
     )));
     lines.push(Line::raw(format!(
-        "residuals [{}]  |r0| {:.3e} N",
+        "residuals [{}]  |r0| {:.3e} {force}",
         res.join(", "),
         r.residual_norm
     )));
@@ -719,9 +793,11 @@ fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
         None => lines.push(Line::raw("cond(K) off")),
     }
     lines.push(Line::raw(format!(
-        "energy: strain {:.4e} J  work {:.4e} J",
+        "energy: strain {:.4e} {en}  work {:.4e} {en}",
         r.energy.strain, r.energy.external_work
     )));
+    // The probes the scene asks for, before the per-boundary lines.
+    lines.extend(r.probes.iter().map(|p| Line::raw(probe_line(p, u))));
     let t = &r.timings;
     lines.push(Line::raw(format!(
         "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
@@ -732,19 +808,23 @@ fn static_lines(r: &StepReport, lines: &mut Vec<Line<'static>>) {
     )));
     for b in &r.ibm {
         lines.push(Line::raw(format!(
-            "{} (IBM): R ({:.3e}, {:.3e}) N, violation {:.1e} m, {} cells cut",
+            "{} (IBM): R ({:.3e}, {:.3e}) {force}, violation {:.1e} {len}, {} cells cut",
             b.name, b.reaction[0], b.reaction[1], b.violation, b.cut_cells
         )));
     }
     for b in &r.boundaries {
         lines.push(Line::raw(format!(
-            "{}: L {:.4} m, {} cells, F ({:.3e}, {:.3e}) N{}",
+            "{}: L {:.4} {len}, {} cells, F ({:.3e}, {:.3e}) {force}{}",
             b.name,
             b.length,
             b.cells_cut,
             b.resultant[0],
             b.resultant[1],
-            if b.lost > 0.0 { " LOST LOAD" } else { "" }
+            if b.lost > 0.0 {
+                format!(" LOST {:.2e} {force}", b.lost)
+            } else {
+                String::new()
+            }
         )));
     }
 }
@@ -802,7 +882,9 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("0       ghost stabilisation off / back on"),
         Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
         Line::raw("M / m   ghost mass gamma_M x10 / /10"),
-        Line::raw("v       next chart: residual, condition, energy, error"),
+        Line::raw("v       next chart: residual, condition, energy, error, probes"),
+        Line::raw("p / P   probe chart: next quantity on y / on x"),
+        Line::raw("w       write a checkpoint of this step (checkpoints/)"),
         Line::raw("r       redo the last step with the current parameters"),
         Line::raw("x       cancel the step being computed"),
         Line::raw("T / t   tolerance x10 / /10"),

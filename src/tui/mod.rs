@@ -15,6 +15,7 @@ use crate::field::Field;
 use crate::record::Recorder;
 use crate::runner;
 use crate::simulation::Simulation;
+use crate::units::Quantity;
 use app::{Action, App, Command, Update, View};
 use ratatui::crossterm::event::{
     self, DisableMouseCapture, EnableMouseCapture, Event, KeyCode, KeyEventKind, MouseEventKind,
@@ -46,6 +47,9 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Up | KeyCode::Char('k') => Some(Action::PanUp),
         KeyCode::Down | KeyCode::Char('j') => Some(Action::PanDown),
         KeyCode::Char('v') => Some(Action::NextChart),
+        KeyCode::Char('p') => Some(Action::NextProbeY),
+        KeyCode::Char('w') => Some(Action::Checkpoint),
+        KeyCode::Char('P') => Some(Action::NextProbeX),
         KeyCode::Char('r') => Some(Action::Redo),
         KeyCode::Char('x') => Some(Action::Cancel),
         KeyCode::Char('T') => Some(Action::RaiseTolerance),
@@ -79,6 +83,7 @@ fn set_params(
 /// The engine thread: steps the simulation, records, reports back.
 fn engine(
     mut sim: Simulation,
+    scene_text: String,
     mut recorder: Option<Recorder>,
     commands: mpsc::Receiver<Command>,
     updates: mpsc::Sender<Update>,
@@ -151,7 +156,7 @@ fn engine(
                 let what = match cmd {
                     Command::SetGammaK(g) => {
                         params.gamma_k = g;
-                        format!("gamma_K = {g:e} Pa")
+                        format!("gamma_K = {g:e} {}", sim.model().units.of(Quantity::Stress))
                     }
                     Command::SetDeltaOverH(d) => {
                         params.delta_over_h = d;
@@ -159,7 +164,7 @@ fn engine(
                     }
                     Command::SetGammaM(g) => {
                         params.gamma_m = g;
-                        format!("gamma_M = {g:e} kg/m^3")
+                        format!("gamma_M = {g:e} {}", sim.model().units.of(Quantity::Density))
                     }
                     Command::SetTolerance(t) => {
                         params.tolerance = t;
@@ -174,6 +179,24 @@ fn engine(
                 let text = format!("parameter: {what} from step {}", sim.step_index() + 1);
                 set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
+            Command::Checkpoint => {
+                let dir = std::path::Path::new("checkpoints");
+                let path = dir.join(format!("{}-step-{:06}.ckpt", sim.model().name, sim.step_index()));
+                let result = std::fs::create_dir_all(dir)
+                    .map_err(|e| format!("cannot create {}: {e}", dir.display()))
+                    .and_then(|_| sim.save_checkpoint(&path, &scene_text).map_err(|e| e.to_string()));
+                let text = match result {
+                    Ok(()) => format!(
+                        "checkpoint of step {} written to {} (continue from it: mpmlab tui SCENE --resume {})",
+                        sim.step_index(),
+                        path.display(),
+                        path.display()
+                    ),
+                    Err(e) => e,
+                };
+                tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
+                let _ = updates.send(Update::Message(text));
+            }
             Command::Quit => break,
         }
     }
@@ -187,7 +210,8 @@ fn engine(
 
 /// Run the TUI on a simulation until the user quits. `recorder` receives
 /// every step. The terminal is restored on exit and on panic.
-pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
+/// `scene_text` is the scene file's text (checkpoints, `w`, keep its hash).
+pub fn run(sim: Simulation, scene_text: String, recorder: Option<Recorder>) -> std::io::Result<()> {
     let mut app = App::new(
         &sim,
         recorder
@@ -199,7 +223,7 @@ pub fn run(sim: Simulation, recorder: Option<Recorder>) -> std::io::Result<()> {
     let (up_tx, up_rx) = mpsc::channel();
     let worker = std::thread::Builder::new().name("mpmlab-engine".into()).spawn({
         let cancel = cancel.clone();
-        move || engine(sim, recorder, cmd_rx, up_tx, cancel)
+        move || engine(sim, scene_text, recorder, cmd_rx, up_tx, cancel)
     })?;
     // ratatui::init installs a panic hook that restores the terminal.
     let mut terminal = ratatui::init();
