@@ -47,12 +47,3 @@ pub fn unit(v: f64, lo: f64, hi: f64) -> f64 {
         0.5
     }
 }
-
-/// Legend text for a field's range.
-pub fn legend(label: &str, lo: f64, hi: f64) -> String {
-    if hi > lo {
-        format!("{label}: {lo:.3e} .. {hi:.3e}")
-    } else {
-        format!("{label}: uniform {lo:.3e}")
-    }
-}

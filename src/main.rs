@@ -465,7 +465,7 @@ fn dynamics_row(r: &StepReport) -> String {
 fn header(first: Option<&StepReport>) -> String {
     let mut h = format!(
         "{:>5} {:>7} {:>8} {:>5} {:>10} {:>10} {:>18} {:>11} {:>11}",
-        "step", "lambda", "unknowns", "iters", "residual", "cond(K)", "method", "strain U", "work W"
+        "step", "load", "unknowns", "iters", "residual", "cond(K)", "method", "strain U", "work W"
     );
     if first.is_some_and(|r| r.condition_unstabilised.is_some()) {
         h.push_str(&format!(" {:>12}", "cond no-ghost"));
@@ -555,7 +555,7 @@ impl Observer for Table {
         }
         for c in r.solver.iter().flat_map(|s| &s.cutbacks) {
             out!(
-                "       cutback in step {}: the increment lambda {:.6} -> {:.6} failed and was halved: {}",
+                "       cutback in step {}: the increment of the load factor {:.6} -> {:.6} failed and was halved: {}",
                 r.step,
                 c.from,
                 c.to,
@@ -740,7 +740,11 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
             r.energy.strain,
             r.energy.external_work,
             r.condition.map_or(String::new(), |c| format!(
-                ", cond(K) {:.3e} ({})",
+                ", {} {:.3e} ({})",
+                // Explicit dynamics conditions the mass it solves with.
+                r.dynamics
+                    .as_ref()
+                    .map_or("cond(K)".to_string(), |d| format!("cond(M {})", d.mass.label())),
                 c.value,
                 c.method.label()
             )),

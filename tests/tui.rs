@@ -579,3 +579,57 @@ fn labels_in_the_scene_units() {
     }
     assert!(!all.contains("(Pa)") && !all.contains(" J "), "{all}");
 }
+
+/// The canvas names the implicit boundaries, draws grid supports
+/// (magenta) and point loads (light red arrows), and ends in a colour bar
+/// with the field's range; one-step charts show their single value.
+#[test]
+fn canvas_shows_names_supports_loads_and_a_colour_bar() {
+    use ratatui::style::Color;
+    let cells = |app: &App, w: u16, h: u16| {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, app)).unwrap();
+        t.backend().buffer().clone()
+    };
+    let count = |b: &ratatui::buffer::Buffer, c: Color| b.content.iter().filter(|x| x.fg == c).count();
+    // The beam: clamped on the grid line x = 0, two point loads at the tip.
+    let sim = sim_with("elastic-beam-ghost", |_| {});
+    let app = App::new(&sim, None);
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let b = cells(&app, w, h);
+        assert!(count(&b, Color::Magenta) >= 5, "{w}x{h}: the clamp");
+        assert!(count(&b, Color::LightRed) >= 2, "{w}x{h}: the loads");
+        // The colour bar: 12 cells through viridis in the bottom border,
+        // low (dark purple) to high (yellow), between the range's ends.
+        let bottom = h - 2;
+        let bar: Vec<Color> = (0..w / 2)
+            .map(|x| &b[(x, bottom)])
+            .filter(|c| c.symbol() == "█")
+            .map(|c| c.fg)
+            .collect();
+        assert_eq!(bar.len(), 12, "{w}x{h}");
+        let [r, g, bl] = mpmlab::colormap::viridis(0.5 / 12.0);
+        assert_eq!(bar[0], Color::Rgb(r, g, bl));
+        let row: String = (0..w / 2).map(|x| b[(x, bottom)].symbol().to_string()).collect();
+        assert!(row.contains("sigma_yy (Pa)"), "{row}");
+    }
+    // The block: its four implicit rollers are named on the canvas.
+    let mut sim = sim_with("block-roller-30", |_| {});
+    let mut app = App::new(&sim, None);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    app.apply(Action::NextChart);
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let rows = screen_at(&app, w, h);
+        let canvas: String = rows
+            .iter()
+            .map(|l| l.chars().take(w as usize / 2).collect::<String>())
+            .collect();
+        for name in ["base", "left", "right", "top"] {
+            assert!(canvas.contains(name), "{w}x{h}: {name}\n{}", rows.join("\n"));
+        }
+        // One step: the condition number is a dot on the chart.
+        let all = rows.join("\n");
+        assert!(all.contains("condition number per step") && all.contains('•'), "{all}");
+    }
+}

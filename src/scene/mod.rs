@@ -475,6 +475,38 @@ pub enum VelocityUpdate {
     Pic,
 }
 
+impl MassKind {
+    /// The name a user reads: `lumped`, `consistent`, `stabilised`.
+    pub fn label(self) -> &'static str {
+        match self {
+            MassKind::Lumped => "lumped",
+            MassKind::Consistent => "consistent",
+            MassKind::Stabilised => "stabilised",
+        }
+    }
+}
+
+impl StressUpdate {
+    /// `USF`, `USL`, `MUSL`.
+    pub fn label(self) -> &'static str {
+        match self {
+            StressUpdate::Usf => "USF",
+            StressUpdate::Usl => "USL",
+            StressUpdate::Musl => "MUSL",
+        }
+    }
+}
+
+impl VelocityUpdate {
+    /// `FLIP`, `PIC`.
+    pub fn label(self) -> &'static str {
+        match self {
+            VelocityUpdate::Flip => "FLIP",
+            VelocityUpdate::Pic => "PIC",
+        }
+    }
+}
+
 /// How condition numbers are computed each step.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]

@@ -23,8 +23,15 @@ pub struct View {
     pub boundaries: Vec<BoundaryView>,
     /// Faces carrying ghost stabilisation in the last step.
     pub ghost_faces: Vec<([f64; 2], [f64; 2])>,
-    /// Implicit Dirichlet boundaries (polylines).
+    /// Implicit Dirichlet boundaries (polylines) and their names.
     pub ibm: Vec<Vec<[f64; 2]>>,
+    pub ibm_names: Vec<String>,
+    /// Grid-line supports as segments (a fixed or roller grid line), and
+    /// supported single nodes as zero-length segments.
+    pub supports: Vec<([f64; 2], [f64; 2])>,
+    /// Point loads: where (the loaded point now) and the force's direction
+    /// (unit vector).
+    pub loads: Vec<([f64; 2], [f64; 2])>,
     /// Cells the implicit boundaries cut.
     pub cut_cells: Vec<usize>,
 }
@@ -85,9 +92,45 @@ impl View {
                 c.dedup();
                 c
             },
+            ibm_names: ibm.iter().map(|b| b.name.clone()).collect(),
             ibm: ibm.into_iter().map(|b| b.points).collect(),
+            supports: supports(sim),
+            loads: sim
+                .model()
+                .point_loads
+                .iter()
+                .filter_map(|l| {
+                    let n = l.force[0].hypot(l.force[1]);
+                    (n > 0.0).then(|| (sim.points().x[l.point], [l.force[0] / n, l.force[1] / n]))
+                })
+                .collect(),
         }
     }
+}
+
+/// The grid-aligned supports of a model as segments.
+fn supports(sim: &Simulation) -> Vec<([f64; 2], [f64; 2])> {
+    use crate::model::GridTarget;
+    let g = &sim.model().grid;
+    let max = g.max();
+    sim.model()
+        .dirichlet
+        .iter()
+        .map(|d| match d.target {
+            GridTarget::Line { axis: 0, index } => {
+                let x = g.origin[0] + index as f64 * g.h;
+                ([x, g.origin[1]], [x, max[1]])
+            }
+            GridTarget::Line { index, .. } => {
+                let y = g.origin[1] + index as f64 * g.h;
+                ([g.origin[0], y], [max[0], y])
+            }
+            GridTarget::Node(n) => {
+                let p = g.node_position(n);
+                (p, p)
+            }
+        })
+        .collect()
 }
 
 /// Something the user asked for.

@@ -230,7 +230,18 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
         0.5 * (g.origin[1] + max[1]) + app.pan[1],
     );
     let (hw, hh) = (0.5 * scale * inner.0 / app.zoom, 0.5 * scale * inner.1 / app.zoom);
-    let legend = format!(" {} ", colormap::legend(&app.view.label, lo, hi));
+    // The colour bar: the field's range through the colour map, low to high.
+    let mut legend = vec![Span::raw(format!(" {} {lo:.3e} ", app.view.label))];
+    for k in 0..12 {
+        let [r, gg, bb] = colormap::viridis((k as f64 + 0.5) / 12.0);
+        legend.push(Span::styled("█", Style::new().fg(Color::Rgb(r, gg, bb))));
+    }
+    legend.push(Span::raw(if hi > lo {
+        format!(" {hi:.3e} ")
+    } else {
+        " (uniform) ".to_string()
+    }));
+    let legend = Line::from(legend);
     let canvas = Canvas::default()
         .block(
             Block::default()
@@ -260,6 +271,18 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                     ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
                 }
             }
+            // Grid supports (magenta lines; a supported node as a cross), with
+            // the grid: the layers above (active cells, boundaries) show over them.
+            let support = Color::Magenta;
+            for (a, b) in &app.view.supports {
+                if a == b {
+                    let d = 0.25 * g.h;
+                    ctx.draw(&CLine::new(a[0] - d, a[1] - d, a[0] + d, a[1] + d, support));
+                    ctx.draw(&CLine::new(a[0] - d, a[1] + d, a[0] + d, a[1] - d, support));
+                } else {
+                    ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], support));
+                }
+            }
             ctx.layer();
             // Outlines of cells `c` in a colour.
             let outline = |ctx: &mut ratatui::widgets::canvas::Context, cells: &[usize], col: Color| {
@@ -279,6 +302,17 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
             for line in &app.view.ibm {
                 for w in line.windows(2) {
                     ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], Color::Cyan));
+                }
+            }
+            // Point loads: an arrow two cells long pointing at the point.
+            for (p, d) in &app.view.loads {
+                let l = 2.0 * g.h;
+                let tail = [p[0] - l * d[0], p[1] - l * d[1]];
+                ctx.draw(&CLine::new(tail[0], tail[1], p[0], p[1], Color::LightRed));
+                let (c, s) = (0.3 * g.h, 0.15 * g.h);
+                for sign in [-1.0, 1.0] {
+                    let head = [p[0] - c * d[0] - sign * s * d[1], p[1] - c * d[1] + sign * s * d[0]];
+                    ctx.draw(&CLine::new(head[0], head[1], p[0], p[1], Color::LightRed));
                 }
             }
             if app.show_ghost_faces {
@@ -304,6 +338,19 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                     color: Color::Yellow,
                 });
             }
+            // Names of the implicit boundaries (at their first vertex) and
+            // of the B-spline boundaries (at the middle of their curve).
+            for (line, name) in app.view.ibm.iter().zip(&app.view.ibm_names) {
+                if let Some(p) = line.first() {
+                    ctx.print(p[0], p[1], Span::styled(name.clone(), Style::new().fg(Color::Cyan)));
+                }
+            }
+            for bv in &app.view.boundaries {
+                if let Some(p) = bv.curve.get(bv.curve.len() / 2) {
+                    let color = if bv.loaded { Color::LightRed } else { Color::White };
+                    ctx.print(p[0], p[1], Span::styled(bv.name.clone(), Style::new().fg(color)));
+                }
+            }
             ctx.layer();
             for (b, coords) in bins.iter().enumerate() {
                 if coords.is_empty() {
@@ -322,14 +369,21 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
 fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
     let p = &app.params;
     let ghost = if p.gamma_k > 0.0 {
-        format!("gamma_K {:.3e} Pa ({:.1e} E)", p.gamma_k, p.gamma_k / app.modulus)
+        format!(
+            "gamma_K {:.3e} {} ({:.1e} E)",
+            p.gamma_k,
+            app.units.of(Quantity::Stress),
+            p.gamma_k / app.modulus
+        )
     } else {
         "ghost off".to_string()
     };
     let text = if app.view.time.is_some() {
         format!(
-            "gamma_M {:.3e} kg/m^3 (m/M: /10, x10)  cond {:?}",
-            p.gamma_m, p.condition
+            "gamma_M {:.3e} {} (m/M: /10, x10)  cond {:?}",
+            p.gamma_m,
+            app.units.of(Quantity::Density),
+            p.condition
         )
     } else {
         format!(
@@ -452,11 +506,18 @@ fn draw_probes(frame: &mut Frame, app: &App, area: Rect) {
     frame.render_widget(chart, area);
 }
 
-/// A named line series (an empty name shows no legend entry).
+/// A named line series (an empty name shows no legend entry); a single
+/// value is drawn as a dot (a line needs two).
 fn line<'a>(name: &str, color: Color, data: &'a [(f64, f64)]) -> ratatui::widgets::Dataset<'a> {
+    use ratatui::widgets::GraphType;
+    let (marker, kind) = if data.len() == 1 {
+        (Marker::Dot, GraphType::Scatter)
+    } else {
+        (Marker::Braille, GraphType::Line)
+    };
     let d = ratatui::widgets::Dataset::default()
-        .marker(Marker::Braille)
-        .graph_type(ratatui::widgets::GraphType::Line)
+        .marker(marker)
+        .graph_type(kind)
         .style(Style::new().fg(color))
         .data(data);
     if name.is_empty() {
@@ -593,7 +654,12 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
         } else {
             format!("{title}(v: next chart) ")
         },
-        ([1.0, xmax], ["1".into(), format!("{xmax}")]),
+        // One step: centre its dot rather than put it on the edge.
+        if xmax > 1.0 {
+            ([1.0, xmax], ["1".into(), format!("{xmax}")])
+        } else {
+            ([0.0, 2.0], ["0".into(), "2".into()])
+        },
         ([ymin, ymax], [label(ymin), label(ymax)]),
     )
     .legend_position(Some(LegendPosition::TopLeft))
@@ -646,8 +712,12 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
     let (en, vel) = (u.of(Quantity::Energy), u.of(Quantity::Velocity));
     let mut lines = vec![
         Line::raw(format!(
-            "t = {:.4} s (dt {:.2e} s)  {:?} mass, {:?}, {:?}",
-            d.time, d.dt, d.mass, d.stress_update, d.velocity_update
+            "t = {:.4} s (dt {:.2e} s)  {} mass, {}, {}",
+            d.time,
+            d.dt,
+            d.mass.label(),
+            d.stress_update.label(),
+            d.velocity_update.label()
         )),
         Line::raw(format!(
             "energy: kinetic {:.4e}  strain {:.4e}  plastic {:.4e} {en}",
@@ -784,7 +854,7 @@ fn static_lines(r: &StepReport, u: Units, lines: &mut Vec<Line<'static>>) {
     )));
     match &r.condition {
         Some(c) => lines.push(Line::raw(format!(
-            "cond(K) {:.3e} ({})  lambda {:.2e}..{:.2e}",
+            "cond(K) {:.3e} ({})  eig {:.2e}..{:.2e}",
             c.value,
             c.method.label(),
             c.lambda_min,
@@ -833,7 +903,7 @@ fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
     let header = if app.view.time.is_some() {
         Row::new(["step", "t s", "unknowns", "bal/W0", "cond(M)", "time s"])
     } else {
-        Row::new(["step", "lambda", "unknowns", "residual", "cond(K)", "time s"])
+        Row::new(["step", "load", "unknowns", "residual", "cond(K)", "time s"])
     }
     .style(Style::new().add_modifier(Modifier::BOLD));
     let visible = area.height.saturating_sub(3) as usize;
