@@ -8,6 +8,7 @@ use mpmlab::record::Recorder;
 use mpmlab::runner::{Observer, RunEnd};
 use mpmlab::scene::Scene;
 use mpmlab::simulation::{Simulation, StepReport};
+use mpmlab::vtk::VtkExport;
 use mpmlab::Model;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -48,6 +49,8 @@ enum Cmd {
         force: bool,
         #[command(flatten)]
         cadence: RecordArgs,
+        #[command(flatten)]
+        vtk: VtkArgs,
         /// Print only the summary.
         #[arg(long)]
         quiet: bool,
@@ -106,6 +109,34 @@ enum Cmd {
         #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory", "record_every", "record_dt", "record_fields"])]
         sweep: Option<PathBuf>,
     },
+}
+
+/// A ParaView time series of the run (`mpmlab::vtk`).
+#[derive(clap::Args, Clone, Default)]
+struct VtkArgs {
+    /// Write a ParaView time series to DIR (created if needed): a .pvd
+    /// collection per kind (points with every field, grid, B-spline and
+    /// implicit boundaries) and a VTK XML file per kind and step.
+    #[arg(long, value_name = "DIR")]
+    vtk: Option<PathBuf>,
+    /// Write every N-th step to --vtk (the initial state, the last step and
+    /// the last good state of a failed run are always written).
+    #[arg(long, value_name = "N", requires = "vtk", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    vtk_every: u64,
+}
+
+impl VtkArgs {
+    /// Create the series and write the initial state; exit status 3 (with
+    /// the folder and the cause on stderr) when it cannot be written.
+    fn open(&self, sim: &Simulation) -> Result<Option<VtkExport>, ExitCode> {
+        let Some(dir) = &self.vtk else { return Ok(None) };
+        VtkExport::create(dir, sim, self.vtk_every as usize)
+            .map(Some)
+            .map_err(|e| {
+                eprintln!("error: {e}");
+                ExitCode::from(3)
+            })
+    }
 }
 
 /// What a recording holds, over the scene's `[record]` settings.
@@ -172,9 +203,18 @@ fn main() -> ExitCode {
             record,
             force,
             cadence,
+            vtk,
             quiet,
             max_memory,
-        }) => run(&scene, record.as_deref(), force, &cadence, quiet, &limits(max_memory)),
+        }) => run(
+            &scene,
+            record.as_deref(),
+            force,
+            &cadence,
+            &vtk,
+            quiet,
+            &limits(max_memory),
+        ),
         Some(Cmd::Check { scene, max_memory }) => check(&scene, &limits(max_memory)),
         Some(Cmd::List { dir }) => list(&dir),
         Some(Cmd::Sweep(args)) => sweep(args),
@@ -491,6 +531,7 @@ fn run(
     record: Option<&Path>,
     force: bool,
     cadence: &RecordArgs,
+    vtk: &VtkArgs,
     quiet: bool,
     limits: &Limits,
 ) -> Result<ExitCode> {
@@ -525,6 +566,10 @@ fn run(
         },
         None => None,
     };
+    let mut vtk = match vtk.open(&sim) {
+        Ok(v) => v,
+        Err(code) => return Ok(code),
+    };
     let m = sim.model();
     out!(
         "scene `{}`: grid {}x{} h={}, {} points, {} load steps",
@@ -547,7 +592,12 @@ fn run(
     // and close the recording; a second one ends the process at once.
     let stop = mpmlab::runner::stop_on_signals();
     let mut detached = Vec::new();
-    let end = mpmlab::runner::run(&mut sim, &mut [&mut table, &mut recorder], &stop, &mut detached);
+    let end = mpmlab::runner::run(
+        &mut sim,
+        &mut [&mut table, &mut recorder, &mut vtk],
+        &stop,
+        &mut detached,
+    );
     for d in &detached {
         eprintln!("error: {d}; continuing without recording");
         code = ExitCode::from(3);
@@ -668,6 +718,15 @@ fn run(
                 out!("recording: {p}  (replay: rerun {p})");
                 out!("recording size: {size}");
             }
+            Err(e) => {
+                eprintln!("error: {e}");
+                code = ExitCode::from(3);
+            }
+        }
+    }
+    if let Some(v) = vtk {
+        match v.finish(&sim) {
+            Ok(summary) => out!("vtk: {summary}"),
             Err(e) => {
                 eprintln!("error: {e}");
                 code = ExitCode::from(3);
