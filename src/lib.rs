@@ -15,7 +15,8 @@
 //! A step returns a [`simulation::StepReport`] (residuals, timings, energies,
 //! condition number, errors against the exact solution) or a
 //! [`simulation::StepFailure`]. Observers — the terminal UI ([`tui`]), the
-//! rerun recorder ([`record`]) and the tests — only read reports and state;
+//! rerun recorder ([`record`]), the ParaView series ([`vtk`]) and the tests
+//! — only read reports and state;
 //! the engine modules never import them.
 
 pub mod assembly;
@@ -51,6 +52,7 @@ pub mod state;
 pub mod sweep;
 pub mod tui;
 pub mod units;
+pub mod vtk;
 
 pub use model::Model;
 pub use simulation::{Params, Simulation, Snapshot, StepFailure, StepReport};

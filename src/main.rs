@@ -9,6 +9,7 @@ use mpmlab::runner::{Observer, RunEnd};
 use mpmlab::scene::Scene;
 use mpmlab::simulation::{Simulation, StepReport};
 use mpmlab::units::Quantity;
+use mpmlab::vtk::VtkExport;
 use mpmlab::Model;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -129,6 +130,8 @@ struct RunArgs {
     force: bool,
     #[command(flatten)]
     cadence: RecordArgs,
+    #[command(flatten)]
+    vtk: VtkArgs,
     /// Print only the summary.
     #[arg(long)]
     quiet: bool,
@@ -136,6 +139,34 @@ struct RunArgs {
     /// with k, M, G, T); default half of the available memory.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     max_memory: Option<u64>,
+}
+
+/// A ParaView time series of the run (`mpmlab::vtk`).
+#[derive(clap::Args, Clone, Default)]
+struct VtkArgs {
+    /// Write a ParaView time series to DIR (created if needed): a .pvd
+    /// collection per kind (points with every field, grid, B-spline and
+    /// implicit boundaries) and a VTK XML file per kind and step.
+    #[arg(long, value_name = "DIR")]
+    vtk: Option<PathBuf>,
+    /// Write every N-th step to --vtk (the initial state, the last step and
+    /// the last good state of a failed run are always written).
+    #[arg(long, value_name = "N", requires = "vtk", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    vtk_every: u64,
+}
+
+impl VtkArgs {
+    /// Create the series and write the initial state; exit status 3 (with
+    /// the folder and the cause on stderr) when it cannot be written.
+    fn open(&self, sim: &Simulation) -> Result<Option<VtkExport>, ExitCode> {
+        let Some(dir) = &self.vtk else { return Ok(None) };
+        VtkExport::create(dir, sim, self.vtk_every as usize)
+            .map(Some)
+            .map_err(|e| {
+                eprintln!("error: {e}");
+                ExitCode::from(3)
+            })
+    }
 }
 
 /// What a recording holds, over the scene's `[record]` settings.
@@ -583,6 +614,7 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         eprintln!("error: --force needs --record FILE or --csv FILE");
         return Ok(ExitCode::from(2));
     }
+    let vtk = &args.vtk;
     if record.is_none() && cadence.given() {
         eprintln!("error: --record-every, --record-dt and --record-fields need --record FILE");
         return Ok(ExitCode::from(2));
@@ -665,6 +697,10 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         },
         None => None,
     };
+    let mut vtk = match vtk.open(&sim) {
+        Ok(v) => v,
+        Err(code) => return Ok(code),
+    };
     let m = sim.model();
     let u = m.units;
     out!(
@@ -693,7 +729,7 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     let mut detached = Vec::new();
     let end = mpmlab::runner::run(
         &mut sim,
-        &mut [&mut table, &mut recorder, &mut csv, &mut checkpoints],
+        &mut [&mut table, &mut recorder, &mut csv, &mut checkpoints, &mut vtk],
         &stop,
         &mut detached,
     );
@@ -854,6 +890,15 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
                 out!("recording: {p}  (replay: rerun {p})");
                 out!("recording size: {size}");
             }
+            Err(e) => {
+                eprintln!("error: {e}");
+                code = ExitCode::from(3);
+            }
+        }
+    }
+    if let Some(v) = vtk {
+        match v.finish(&sim) {
+            Ok(summary) => out!("vtk: {summary}"),
             Err(e) => {
                 eprintln!("error: {e}");
                 code = ExitCode::from(3);
