@@ -168,6 +168,8 @@ pub enum Action {
     NextProbeX,
     /// Write a checkpoint of the state after the last step.
     Checkpoint,
+    /// Start or stop a ParaView series of the steps from now on.
+    ToggleVtk,
     /// Next chart: residuals, condition numbers, energies, errors.
     NextChart,
     /// Show or hide the grid lines, the active cells, the ghost faces.
@@ -214,6 +216,8 @@ pub enum Command {
     Cancel,
     /// Write a checkpoint of the current state (`checkpoints/`).
     Checkpoint,
+    /// Start (or stop) writing a ParaView series (`vtk/`), every step from now.
+    ToggleVtk,
     Quit,
 }
 
@@ -632,6 +636,7 @@ impl App {
                 }
                 None
             }
+            Action::ToggleVtk => Some(Command::ToggleVtk),
             Action::Checkpoint => {
                 if self.busy {
                     self.status = "a step is running: checkpoint after it".into();

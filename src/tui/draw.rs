@@ -955,6 +955,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("v       next chart: residual, condition, energy, error, probes"),
         Line::raw("p / P   probe chart: next quantity on y / on x"),
         Line::raw("w       write a checkpoint of this step (checkpoints/)"),
+        Line::raw("V       start / stop a ParaView series from this step (vtk/)"),
         Line::raw("r       redo the last step with the current parameters"),
         Line::raw("x       cancel the step being computed"),
         Line::raw("T / t   tolerance x10 / /10"),

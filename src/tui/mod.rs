@@ -49,6 +49,7 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('v') => Some(Action::NextChart),
         KeyCode::Char('p') => Some(Action::NextProbeY),
         KeyCode::Char('w') => Some(Action::Checkpoint),
+        KeyCode::Char('V') => Some(Action::ToggleVtk),
         KeyCode::Char('P') => Some(Action::NextProbeX),
         KeyCode::Char('r') => Some(Action::Redo),
         KeyCode::Char('x') => Some(Action::Cancel),
@@ -99,6 +100,8 @@ fn engine(
     }
     sim.set_cancel(Some(cancel.clone()));
     let mut field = Field::SigmaYy;
+    // A ParaView series the user asked for (`V`), written step by step.
+    let mut vtk: Option<crate::vtk::VtkExport> = None;
     // The state before the last step and that step's outcome, for redo.
     let mut before: Option<(crate::simulation::Snapshot, Option<app::Outcome>)> = None;
     let tell = |updates: &mpsc::Sender<Update>, detached: Vec<String>| {
@@ -112,7 +115,7 @@ fn engine(
             Command::Step => {
                 cancel.store(false, Ordering::SeqCst);
                 let snap = sim.snapshot();
-                let s = runner::step(&mut sim, &mut [&mut recorder]);
+                let s = runner::step(&mut sim, &mut [&mut recorder, &mut vtk]);
                 tell(&updates, s.detached);
                 before = Some((snap, Some(s.result.clone())));
                 let _ = updates.send(match s.result {
@@ -137,7 +140,7 @@ fn engine(
                     p.tolerance
                 );
                 tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
-                let s = runner::step(&mut sim, &mut [&mut recorder]);
+                let s = runner::step(&mut sim, &mut [&mut recorder, &mut vtk]);
                 tell(&updates, s.detached);
                 let new = s.result;
                 before = Some((snap, Some(new.clone())));
@@ -197,8 +200,38 @@ fn engine(
                 tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
                 let _ = updates.send(Update::Message(text));
             }
+            Command::ToggleVtk => {
+                let text = match vtk.take() {
+                    Some(v) => match v.finish(&sim) {
+                        Ok(summary) => format!("ParaView series closed: {summary}"),
+                        Err(e) => e.to_string(),
+                    },
+                    None => {
+                        let dir = std::path::PathBuf::from(format!(
+                            "vtk/{}-from-step-{}",
+                            sim.model().name,
+                            sim.step_index()
+                        ));
+                        match crate::vtk::VtkExport::create(&dir, &sim, 1) {
+                            Ok(v) => {
+                                vtk = Some(v);
+                                format!(
+                                    "ParaView series: every step from here into {} (V stops; open points.pvd)",
+                                    dir.display()
+                                )
+                            }
+                            Err(e) => e.to_string(),
+                        }
+                    }
+                };
+                tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
+                let _ = updates.send(Update::Message(text));
+            }
             Command::Quit => break,
         }
+    }
+    if let Some(v) = vtk {
+        let _ = v.finish(&sim);
     }
     if let Some(mut rec) = recorder {
         // The state the session ended on, whatever the cadence.
