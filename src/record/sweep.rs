@@ -8,6 +8,10 @@
 //! | `charts/error_vs_time/runs`, `.../pareto` | Points2D / LineStrips2D in log10 coordinates, labelled by run |
 //! | `charts/error_vs_h/<group>` | LineStrips2D and Points2D, log10 coordinates |
 //! | `charts/stability` | Points2D on a grid (column: last setting, row: the others), green completed, red failed |
+//!
+//! The charts are drawn with y up (a static transform on `charts`, as for
+//! a run's scene: [`super::layout`]), and the recording is listed in the
+//! viewer as `sweep <name>`, after the sweep's folder.
 
 use super::{RecordError, APP_ID};
 use crate::sweep::{pareto_front, RunResult};
@@ -24,10 +28,16 @@ pub fn record_sweep(path: &Path, summary: &str, results: &[RunResult], h_key: Op
         path: path.to_path_buf(),
         message: m,
     };
+    let name = path
+        .parent()
+        .and_then(|d| d.file_name())
+        .map_or("sweep".to_string(), |d| format!("sweep {}", d.to_string_lossy()));
     let rec = RecordingStreamBuilder::new(APP_ID)
+        .recording_name(name)
         .save(path)
         .map_err(|e| err(e.to_string()))?;
     let check = |r: Result<(), rerun::RecordingStreamError>| r.map_err(|e| err(e.to_string()));
+    check(rec.log_static("charts", &super::layout::y_up()))?;
     check(rec.log_static(
         "sweep/summary",
         &rerun::TextDocument::new(format!("```\n{summary}\n```")).with_media_type(rerun::MediaType::markdown()),
