@@ -730,7 +730,7 @@ impl Recorder {
             let (color, width, label) = if b.traction.is_some() {
                 (rerun::Color::from_rgb(230, 80, 60), 3.0, format!("{name} (traction)"))
             } else {
-                (rerun::Color::from_rgb(230, 230, 230), 1.5, format!("{name} (free)"))
+                (rerun::Color::from_rgb(230, 230, 230), 1.5, name.to_string())
             };
             let curve: Vec<[f32; 2]> = s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
             self.check(
