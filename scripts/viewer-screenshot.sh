@@ -64,7 +64,10 @@ if ! kill -0 "$xvfb" 2>/dev/null; then
     exit 0
 fi
 
-DISPLAY=":$d" WGPU_BACKEND=vulkan setsid rerun --new --window-size "$size" "$rrd" >"$work/viewer.log" 2>&1 &
+# The viewer keeps its state (layouts included) under $XDG_DATA_HOME/rerun:
+# a fresh one makes the screenshot show the recording's own layout and
+# leaves the user's state alone.
+DISPLAY=":$d" WGPU_BACKEND=vulkan XDG_DATA_HOME="$work/data" setsid rerun --new --window-size "$size" "$rrd" >"$work/viewer.log" 2>&1 &
 viewer=$!
 sleep "$wait"
 if ! kill -0 "$viewer" 2>/dev/null; then

@@ -11,12 +11,61 @@
 //!
 //! The charts are drawn with y up (a static transform on `charts`, as for
 //! a run's scene: [`super::layout`]), and the recording is listed in the
-//! viewer as `sweep <name>`, after the sweep's folder.
+//! viewer as `sweep <name>`, after the sweep's folder. Its own layout
+//! ([`layout`]) shows the three charts, the per-run metrics and the
+//! summary; without one the viewer would reuse the last run's layout
+//! (recordings share the application id) and show empty panels.
 
 use super::{RecordError, APP_ID};
 use crate::sweep::{pareto_front, RunResult};
 use rerun::RecordingStreamBuilder;
 use std::path::Path;
+
+/// The sweep's layout: the charts on the left (error against h only when
+/// the sweep varies h), the summary and the per-run metrics on the right.
+fn layout(with_h: bool) -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::{
+        Blueprint, ContainerLike, Horizontal, Spatial2DView, TextDocumentView, TimeSeriesView, Vertical,
+    };
+    let mut charts: Vec<ContainerLike> = vec![Spatial2DView::new(format!(
+        "log10 error against log10 wall time ({}), Pareto front red",
+        super::layout::unit(super::layout::Quantity::Time)
+    ))
+    .with_origin("/")
+    .with_contents(["/charts/error_vs_time/**"])
+    .into()];
+    if with_h {
+        charts.push(
+            Spatial2DView::new(format!(
+                "log10 error against log10 h ({})",
+                super::layout::unit(super::layout::Quantity::Length)
+            ))
+            .with_origin("/")
+            .with_contents(["/charts/error_vs_h/**"])
+            .into(),
+        );
+    }
+    charts.push(
+        Spatial2DView::new("stability: green completed, red failed")
+            .with_origin("/")
+            .with_contents(["/charts/stability/**"])
+            .into(),
+    );
+    let charts = Vertical::new(charts);
+    let right = Vertical::new([
+        TextDocumentView::new("summary").with_origin("/sweep/summary").into(),
+        TimeSeriesView::new("per run (x: run index)")
+            .with_origin("/runs")
+            .into(),
+    ]);
+    // The charts' views start at the root: a transform above a view's
+    // origin does not apply in it, and the y flip sits on `charts`.
+    use rerun::blueprint::components::PanelState;
+    use rerun::blueprint::{SelectionPanel, TimePanel};
+    Blueprint::new(Horizontal::new([charts.into(), right.into()]))
+        .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
+        .with_time_panel(TimePanel::new().with_state(PanelState::Collapsed).with_timeline("run"))
+}
 
 fn log10_point(x: f64, y: f64) -> Option<[f32; 2]> {
     (x > 0.0 && y > 0.0 && x.is_finite() && y.is_finite()).then(|| [x.log10() as f32, y.log10() as f32])
@@ -37,6 +86,7 @@ pub fn record_sweep(path: &Path, summary: &str, results: &[RunResult], h_key: Op
         .save(path)
         .map_err(|e| err(e.to_string()))?;
     let check = |r: Result<(), rerun::RecordingStreamError>| r.map_err(|e| err(e.to_string()));
+    check(layout(h_key.is_some()).send(&rec, rerun::blueprint::BlueprintActivation::default()))?;
     check(rec.log_static("charts", &super::layout::y_up()))?;
     check(rec.log_static(
         "sweep/summary",
