@@ -515,3 +515,267 @@ fn a_recording_with_a_cadence_keeps_the_layout() {
     let _ = std::fs::remove_file(&path);
     assert!(activated && blueprint > 5, "{blueprint} blueprint chunks");
 }
+
+/// Record `steps` steps of `scene` (fewer if it finishes); the chunks of
+/// the recording store, the blueprint's view titles, and the simulation.
+fn record_steps(scene: &str, steps: usize) -> (Vec<rerun::log::Chunk>, Vec<String>, mpmlab::Simulation) {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::external::re_sdk_types::blueprint::archetypes::ViewBlueprint;
+    use rerun::log::{Chunk, LogMsg};
+    let mut sim = sim_with(scene, |_| {});
+    let text = std::fs::read_to_string(common::scene_path(scene)).unwrap();
+    let path = temp_path(&format!("rec-view-{scene}"), "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    for _ in 0..steps {
+        if sim.finished() {
+            break;
+        }
+        let r = sim.step().unwrap();
+        rec.log_step(&r, &sim).unwrap();
+    }
+    rec.finish().unwrap();
+    let name = ViewBlueprint::descriptor_display_name().component;
+    let (mut chunks, mut views) = (Vec::new(), Vec::new());
+    let file = std::fs::File::open(&path).unwrap();
+    for msg in DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap() {
+        if let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() {
+            let c = Chunk::from_arrow_msg(&arrow).unwrap();
+            if store.is_recording() {
+                chunks.push(c);
+            } else if c.entity_path().to_string().starts_with("/view/") {
+                for names in c.iter_slices::<String>(name) {
+                    views.extend(names.iter().map(|n| n.to_string()));
+                }
+            }
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    (chunks, views, sim)
+}
+
+#[test]
+fn the_scene_is_drawn_with_physical_y_up() {
+    // rerun's 2D views draw y downward: every entity of the scene carries a
+    // static transform scaling y by -1 (so the plate's hole is drawn
+    // bottom-left), while the points keep their true coordinates.
+    let (chunks, _, sim) = record_steps("plate-hole-neumann", 1);
+    let scale = rerun::Transform3D::descriptor_scale().component;
+    let mut flipped = std::collections::BTreeMap::new();
+    for c in &chunks {
+        for s in c.iter_slices::<[f32; 3]>(scale) {
+            flipped.insert(c.entity_path().to_string(), s[0]);
+        }
+    }
+    for root in ["/points", "/grid", "/boundaries", "/ibm", "/legend"] {
+        assert_eq!(flipped.get(root), Some(&[1.0, -1.0, 1.0]), "{root}: {flipped:?}");
+    }
+    let positions = rerun::Points2D::descriptor_positions().component;
+    let last: Vec<[f32; 2]> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/points")
+        .flat_map(|c| {
+            c.iter_slices::<[f32; 2]>(positions)
+                .map(|p| p.to_vec())
+                .collect::<Vec<_>>()
+        })
+        .last()
+        .unwrap();
+    let expected: Vec<[f32; 2]> = sim.points().x.iter().map(|x| [x[0] as f32, x[1] as f32]).collect();
+    assert_eq!(last, expected);
+}
+
+#[test]
+fn occupied_cells_hold_the_points_shown() {
+    // After a step the active cells are those of its start; `grid/occupied`
+    // are the cells of the points shown: every point lies in one of them
+    // and each holds a point (checked on the boxes read back).
+    let (chunks, _, sim) = record_steps("plate-hole-neumann", 1);
+    let strips = rerun::LineStrips2D::descriptor_strips().component;
+    let step_tl: rerun::TimelineName = "step".into();
+    let mut boxes: Vec<[f32; 4]> = Vec::new();
+    for c in chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/grid/occupied")
+    {
+        for ((t, _), batch) in c
+            .iter_component_indices(step_tl, strips)
+            .zip(c.iter_component::<rerun::components::LineStrip2D>(strips))
+        {
+            if t.as_i64() == 1 {
+                boxes = batch
+                    .iter()
+                    .map(|s| {
+                        let xs = s.0.iter().map(|p| p.x());
+                        let ys = s.0.iter().map(|p| p.y());
+                        [
+                            xs.clone().fold(f32::INFINITY, f32::min),
+                            ys.clone().fold(f32::INFINITY, f32::min),
+                            xs.fold(f32::NEG_INFINITY, f32::max),
+                            ys.fold(f32::NEG_INFINITY, f32::max),
+                        ]
+                    })
+                    .collect();
+            }
+        }
+    }
+    assert!(!boxes.is_empty());
+    let inside = |b: &[f32; 4], p: [f32; 2]| p[0] >= b[0] && p[0] <= b[2] && p[1] >= b[1] && p[1] <= b[3];
+    let pts: Vec<[f32; 2]> = sim.points().x.iter().map(|x| [x[0] as f32, x[1] as f32]).collect();
+    for p in &pts {
+        assert!(boxes.iter().any(|b| inside(b, *p)), "point {p:?} in no occupied cell");
+    }
+    for b in &boxes {
+        assert!(pts.iter().any(|p| inside(b, *p)), "occupied cell {b:?} holds no point");
+    }
+}
+
+#[test]
+fn the_colour_bar_names_the_field_its_unit_and_range() {
+    let (chunks, _, sim) = record_steps("column-small-strain", 1);
+    let labels = rerun::Points2D::descriptor_labels().component;
+    let shown: Vec<String> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/legend/range")
+        .flat_map(|c| {
+            c.iter_slices::<String>(labels)
+                .map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .last()
+        .unwrap();
+    let syy: Vec<f64> = sim.points().stress.iter().map(|s| s[1]).collect();
+    let (lo, hi) = syy
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    assert_eq!(shown, [format!("sigma_yy (Pa): {lo:.3e} (left) .. {hi:.3e} (right)")]);
+}
+
+#[test]
+fn residual_history_of_each_step_is_a_bar_chart() {
+    // The viewer shows the step under the time cursor: one bar per
+    // iteration, log10 of the relative residual the step reported.
+    use rerun::external::re_sdk_types::datatypes::TensorBuffer;
+    let mut sim = sim_with("slender-cantilever-finite-0", |s| s.analysis.load_steps = 40);
+    let text = std::fs::read_to_string(common::scene_path("slender-cantilever-finite-0")).unwrap();
+    let path = temp_path("rec-residuals", "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    let mut reports = Vec::new();
+    for _ in 0..2 {
+        let r = sim.step().unwrap();
+        rec.log_step(&r, &sim).unwrap();
+        reports.push(r);
+    }
+    rec.finish().unwrap();
+    let values = rerun::BarChart::descriptor_values().component;
+    let step_tl: rerun::TimelineName = "step".into();
+    let mut bars: BTreeMap<i64, Vec<f64>> = BTreeMap::new();
+    for c in read_chunks(&path) {
+        if c.entity_path().to_string() != "/metrics/newton/residual_history" {
+            continue;
+        }
+        for ((t, _), batch) in c
+            .iter_component_indices(step_tl, values)
+            .zip(c.iter_component::<rerun::components::TensorData>(values))
+        {
+            let TensorBuffer::F64(b) = &batch[0].0.buffer else {
+                panic!("residuals as f64")
+            };
+            bars.insert(t.as_i64(), b.to_vec());
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    for r in &reports {
+        assert!(r.residuals.len() > 2, "a Newton step iterates: {:?}", r.residuals);
+        let expected: Vec<f64> = r.residuals.iter().map(|v| v.log10()).collect();
+        assert_eq!(bars[&(r.step as i64)], expected, "step {}", r.step);
+    }
+}
+
+#[test]
+fn each_layout_shows_the_panels_its_run_has() {
+    let has = |views: &[String], s: &str| views.iter().any(|v| v.contains(s));
+    // Linear, with an exact solution: residual, conditioning, energies and errors.
+    let (_, v, _) = record_steps("column-small-strain", 1);
+    for s in [
+        "scene, y up",
+        "|K du - r|/|r|, this step",
+        "condition number of the stiffness",
+        "energy (J/m)",
+        "error vs exact",
+        "events",
+    ] {
+        assert!(has(&v, s), "column: no `{s}` in {v:?}");
+    }
+    assert!(!has(&v, "without ghost") && !has(&v, "Newton"), "{v:?}");
+    // Newton with ghost and no exact solution: both condition numbers apart.
+    let (_, v, _) = record_steps("elastic-beam-ghost", 1);
+    for s in [
+        "|r|/|r0|, Newton, this step",
+        "Newton iterations",
+        "cond., with ghost",
+        "cond., without ghost",
+        "energy (J/m)",
+        // G 5.5's tip, in the scene's units.
+        "probes (displacements m, stresses Pa, forces N/m)",
+    ] {
+        assert!(has(&v, s), "beam: no `{s}` in {v:?}");
+    }
+    assert!(
+        !has(&v, "error"),
+        "beam: an errors panel without an exact solution: {v:?}"
+    );
+    // Explicit dynamics: energies, their balance and the masses' conditioning.
+    let (_, v, _) = record_steps("ghost-collision-elastic", 1);
+    for s in [
+        "energy (J/m)",
+        "balance error",
+        "mass: stab., lumped",
+        "consistent mass",
+    ] {
+        assert!(has(&v, s), "collision: no `{s}` in {v:?}");
+    }
+    assert!(
+        !has(&v, "|r") && !has(&v, "error vs") && !has(&v, "probes"),
+        "collision: {v:?}"
+    );
+    // A scene in mm, N, MPa is titled so.
+    let (_, v, _) = record_steps("block-roller-0", 1);
+    for s in [
+        "sigma_yy (MPa)",
+        "energy (N mm/mm)",
+        "probes (displacements mm, stresses MPa, forces N/mm)",
+    ] {
+        assert!(has(&v, s), "block: no `{s}` in {v:?}");
+    }
+}
+
+#[test]
+fn recordings_are_named_after_scene_and_run() {
+    use mpmlab::record::recording_name;
+    use std::path::Path;
+    assert_eq!(
+        recording_name("plate", Path::new("recordings/plate-20261201-2330.rrd")),
+        "plate-20261201-2330"
+    );
+    assert_eq!(
+        recording_name("plate", Path::new("sweeps/s/recordings/h=0.1.rrd")),
+        "plate: h=0.1"
+    );
+    // The name travels in the file, as the recording's property.
+    let (chunks, _, _) = record_steps("column-small-strain", 1);
+    let name = rerun::RecordingInfo::descriptor_name().component;
+    let names: Vec<String> = chunks
+        .iter()
+        .flat_map(|c| {
+            c.iter_slices::<String>(name)
+                .flat_map(|n| n.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert_eq!(names.len(), 1, "{names:?}");
+    // The test file's stem holds the scene's name: the stem alone.
+    assert!(
+        names[0].starts_with("mpmlab-rec-view-column-small-strain-"),
+        "{names:?}"
+    );
+}

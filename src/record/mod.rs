@@ -10,26 +10,32 @@
 //! | `grid` | LineStrips2D | static |
 //! | `recording` | TextDocument (the cadence and the per-point fields) | static |
 //! | `recording/fields` | TextLog (the per-point fields, comma-separated) | static |
-//! | `grid/active` | LineStrips2D (outlines of cells holding points) | frames |
+//! | `grid/active` | LineStrips2D (outlines of the cells the step was solved on: those of the points at its start) | frames |
+//! | `grid/occupied` | LineStrips2D (outlines of the cells holding the points shown, at the step's end) | frames |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of the recorded fields (of `sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | frames |
-//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan) | frames |
+//! | `legend/colour_bar` | LineStrips2D (the colour map under the grid, low values left) | static |
+//! | `legend/range` | Points2D (a label: the colour field, its unit and the frame's range) | frames |
+//! | `points`, `grid`, `boundaries`, `ibm`, `legend` | Transform3D (y scaled by -1: drawn with y up, [`layout`]) | static |
+//! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan, labelled) | frames |
 //! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | frames |
 //! | `metrics/ibm/<name>/{reaction_x,reaction_y,violation,violation_rms,cut_cells}` | Scalars | every step |
 //! | `grid/ghost_faces` | LineStrips2D (faces carrying ghost stabilisation) | frames |
 //! | `metrics/condition/stiffness_unstabilised` | Scalars (with ghost on: the tangent without it) | every step |
 //! | `metrics/newton/iterations`, `metrics/ghost/faces`, `metrics/energy/plastic_dissipation` | Scalars | every step |
-//! | `boundaries/<name>/curve` | LineStrips2D (red: carries a traction) | frames |
+//! | `boundaries/<name>/curve` | LineStrips2D (red, thick, labelled `(traction)`: carries a traction) | frames |
 //! | `boundaries/<name>/control_points` | Points2D (Bezier control points) | frames |
 //! | `metrics/boundary/<name>/{length,area,cells_cut,resultant_x,resultant_y}` | Scalars | every step |
 //! | `metrics/residual` | Scalars, on `iteration` | every iteration |
+//! | `metrics/newton/residual_history` | BarChart (log10 of the step's residuals against their iteration) | every step |
 //! | `metrics/condition/stiffness` | Scalars | every step |
 //! | `metrics/log10/residual`, `metrics/log10/condition/stiffness` | Scalars | as above |
 //! | `metrics/energy/strain`, `metrics/energy/external_work` | Scalars | every step |
-//! | `metrics/error/<measure>` | Scalars | every step with an exact solution |
+//! | `metrics/energy/balance_error` | Scalars (quasi-static: strain + plastic - external work) | every step |
+//! | `metrics/error/<measure>`, `metrics/log10/error/<measure>` | Scalars | every step with an exact solution |
 //! | `metrics/probe/<name>/{ux,uy,sxx,syy,sxy,fx,fy}` | Scalars (the scene's `[[probe]]`s, [`crate::probe`]) | every step |
 //! | `metrics/time/<phase>` | Scalars (s) | every step |
 //! | `metrics/unknowns` | Scalars | every step |
-//! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics; also on `time`) | every step |
+//! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics, balance `W_kin + W_eps + W_p - W_ext - W_0`; also on `time`) | every step |
 //! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (explicit dynamics) | every step |
 //! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, failures, end) | as they happen |
@@ -43,16 +49,22 @@
 //! `points` entity is logged at those steps only).
 //!
 //! The file also holds a blueprint (rerun's stored layout, [`layout`]) so
-//! the viewer opens on the scene with the metrics beside it.
+//! the viewer opens on the scene with the panels the run has beside it,
+//! and static `SeriesLines` (and, in runs of at most
+//! [`layout::MARKED_STEPS`] steps, `SeriesPoints`) naming and colouring
+//! the series. The recording is listed under its scene and run
+//! ([`recording_name`]).
 //!
 //! The engine knows nothing of this module: it reads reports and state.
 
+pub mod layout;
 pub mod sweep;
 
 use crate::colormap;
 use crate::field::Field;
 use crate::model::record::{Plan, RecordSettings};
 use crate::simulation::{Simulation, StepFailure, StepReport};
+use layout::{order, titled, Contents, Quantity};
 use rerun::{RecordingStream, RecordingStreamBuilder};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, Receiver, SyncSender};
@@ -73,36 +85,6 @@ fn cell_box(g: &crate::grid::Grid, c: usize) -> [[f32; 2]; 5] {
     let m = g.cell_min(c % g.nx, c / g.nx);
     let (x0, y0, x1, y1) = (m[0] as f32, m[1] as f32, (m[0] + g.h) as f32, (m[1] + g.h) as f32);
     [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
-}
-
-/// The viewer's default layout (a blueprint stored in the file): the 2D
-/// scene (points, grid, boundaries) on the left; on the right the Newton
-/// residuals (or, for explicit dynamics, the energies), the condition
-/// numbers, the errors and the event log.
-fn layout(dynamic: bool) -> rerun::blueprint::Blueprint {
-    use rerun::blueprint::{
-        Blueprint, ContainerLike, Horizontal, Spatial2DView, TextLogView, TimeSeriesView, Vertical,
-    };
-    let scene = Spatial2DView::new("scene").with_origin("/").with_contents([
-        "/points",
-        "/grid/**",
-        "/boundaries/**",
-        "/ibm/**",
-    ]);
-    let first = if dynamic {
-        TimeSeriesView::new("energy (J)").with_origin("/metrics/energy")
-    } else {
-        TimeSeriesView::new("log10 Newton residual").with_origin("/metrics/log10/residual")
-    };
-    let right: Vec<ContainerLike> = vec![
-        first.into(),
-        TimeSeriesView::new("log10 condition numbers")
-            .with_origin("/metrics/log10/condition")
-            .into(),
-        TimeSeriesView::new("errors").with_origin("/metrics/error").into(),
-        TextLogView::new("events").with_origin("/events").into(),
-    ];
-    Blueprint::new(Horizontal::new([scene.into(), Vertical::new(right).into()]).with_column_shares([0.55, 0.45]))
 }
 
 /// The bulky part of a point frame: copied from the simulation on the
@@ -165,7 +147,7 @@ struct FrameWriter {
 }
 
 impl FrameWriter {
-    fn start(rec: RecordingStream, grid: crate::grid::Grid) -> FrameWriter {
+    fn start(rec: RecordingStream, grid: crate::grid::Grid, legend: ColourBar) -> FrameWriter {
         // Two frames in flight at most: a slow disk slows the run down
         // instead of filling the memory.
         let (tx, rx) = mpsc::sync_channel::<Frame>(1);
@@ -179,7 +161,7 @@ impl FrameWriter {
                 for f in rx {
                     let failed = err.lock().map_or(true, |e| e.is_some());
                     if !failed {
-                        if let Err(e) = write_frame(&rec, &grid, &f, &mut colors) {
+                        if let Err(e) = write_frame(&rec, &grid, &legend, &f, &mut colors) {
                             if let Ok(mut slot) = err.lock() {
                                 *slot = Some(e.to_string());
                             }
@@ -214,10 +196,12 @@ impl FrameWriter {
 }
 
 /// Log one frame: the points with colours, radii and the recorded fields,
-/// the active cells and the ghost faces.
+/// the colour bar's range, the active and occupied cells and the ghost
+/// faces.
 fn write_frame(
     rec: &RecordingStream,
     g: &crate::grid::Grid,
+    legend: &ColourBar,
     f: &Frame,
     colors: &mut Vec<rerun::Color>,
 ) -> Result<(), rerun::RecordingStreamError> {
@@ -235,7 +219,8 @@ fn write_frame(
         "points",
         &rerun::Points2D::new(f.positions.iter().copied())
             .with_colors(colors.iter().copied())
-            .with_radii(f.radii.iter().copied()),
+            .with_radii(f.radii.iter().copied())
+            .with_draw_order(order::POINTS),
     )?;
     // The recorded fields' values per point, shown when a point is hovered.
     if !f.fields.is_empty() {
@@ -245,17 +230,107 @@ fn write_frame(
         }
         rec.log("points", &values)?;
     }
+    rec.log("legend/range", &legend.range(lo, hi))?;
+    // The cells holding the points now: after a large step they differ
+    // from the active cells, which are those of the step's start (the
+    // mesh the step was solved on, with its ghost faces).
+    let mut occupied: Vec<usize> = f
+        .positions
+        .iter()
+        .filter_map(|p| {
+            let i = ((p[0] as f64 - g.origin[0]) / g.h).floor();
+            let j = ((p[1] as f64 - g.origin[1]) / g.h).floor();
+            (i >= 0.0 && j >= 0.0 && (i as usize) < g.nx && (j as usize) < g.ny).then(|| j as usize * g.nx + i as usize)
+        })
+        .collect();
+    occupied.sort_unstable();
+    occupied.dedup();
+    rec.log(
+        "grid/occupied",
+        &rerun::LineStrips2D::new(occupied.iter().map(|&c| cell_box(g, c)))
+            .with_colors([rerun::Color::from_rgb(110, 110, 140)])
+            .with_radii([rerun::Radius::new_ui_points(0.75)])
+            .with_draw_order(order::OCCUPIED),
+    )?;
     rec.log(
         "grid/active",
         &rerun::LineStrips2D::new(f.cells.iter().map(|&c| cell_box(g, c)))
-            .with_colors([rerun::Color::from_rgb(60, 120, 200)]),
+            .with_colors([rerun::Color::from_rgb(60, 120, 200)])
+            .with_radii([rerun::Radius::new_ui_points(1.0)])
+            .with_draw_order(order::ACTIVE),
     )?;
     rec.log(
         "grid/ghost_faces",
-        &rerun::LineStrips2D::new(f.ghost.iter().copied()).with_colors([rerun::Color::from_rgb(240, 140, 20)]),
+        &rerun::LineStrips2D::new(f.ghost.iter().copied())
+            .with_colors([rerun::Color::from_rgb(240, 140, 20)])
+            .with_radii([rerun::Radius::new_ui_points(2.5)])
+            .with_draw_order(order::GHOST_FACES),
     )?;
     rec.reset_time();
     Ok(())
+}
+
+/// A colour bar under the grid: the colour map as a row of segments
+/// (static) and, per frame, one label under the grid naming the field, its
+/// unit and the frame's range (centred, so that the view's bounds, fitted
+/// to the data, do not cut it).
+#[derive(Clone)]
+struct ColourBar {
+    /// Field title with its unit (`sigma_yy (Pa)`).
+    title: String,
+    x: [f32; 2],
+    /// The bar's height and the label's anchor (m).
+    y: f32,
+    label_y: f32,
+    width: f32,
+}
+
+impl ColourBar {
+    /// Segments of the colour bar.
+    const SEGMENTS: usize = 32;
+
+    fn new(g: &crate::grid::Grid, title: String) -> ColourBar {
+        let max = g.max();
+        ColourBar {
+            title,
+            x: [g.origin[0] as f32, max[0] as f32],
+            y: (g.origin[1] - 2.0 * g.h) as f32,
+            label_y: (g.origin[1] - g.h) as f32,
+            width: (0.5 * g.h) as f32,
+        }
+    }
+
+    fn bar(&self) -> rerun::LineStrips2D {
+        let n = Self::SEGMENTS;
+        let dx = (self.x[1] - self.x[0]) / n as f32;
+        let strips = (0..n).map(|k| {
+            let x = self.x[0] + k as f32 * dx;
+            [[x, self.y], [x + dx, self.y]]
+        });
+        let colours = (0..n).map(|k| {
+            let [r, g, b] = colormap::viridis((k as f64 + 0.5) / n as f64);
+            rerun::Color::from_rgb(r, g, b)
+        });
+        rerun::LineStrips2D::new(strips)
+            .with_colors(colours)
+            .with_radii([rerun::Radius::new_scene_units(0.5 * self.width)])
+            .with_draw_order(order::LEGEND)
+    }
+
+    /// The label: the field and the range of the frame's values, from the
+    /// bar's left end (min) to its right end (max).
+    fn range(&self, lo: f64, hi: f64) -> rerun::Points2D {
+        let label = if hi > lo {
+            format!("{}: {lo:.3e} (left) .. {hi:.3e} (right)", self.title)
+        } else {
+            format!("{}: uniform {lo:.3e}", self.title)
+        };
+        rerun::Points2D::new([[0.5 * (self.x[0] + self.x[1]), self.label_y]])
+            .with_labels([label])
+            .with_colors([rerun::Color::from_rgb(230, 230, 230)])
+            .with_radii([rerun::Radius::new_ui_points(0.5)])
+            .with_draw_order(order::LEGEND)
+    }
 }
 
 /// What a finished recording holds and its size.
@@ -307,6 +382,45 @@ pub fn human_bytes(b: f64) -> String {
     }
 }
 
+/// The name a recording is listed under in the viewer: its file's stem
+/// (which the TUI and sweeps make from the scene and the run), with the
+/// scene's name in front when the stem does not hold it.
+pub fn recording_name(scene: &str, path: &Path) -> String {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if stem.is_empty() {
+        scene.to_string()
+    } else if stem.contains(scene) {
+        stem
+    } else {
+        format!("{scene}: {stem}")
+    }
+}
+
+/// What the run will record, from its model: it decides the layout.
+fn contents(sim: &Simulation, colour: Field) -> Contents {
+    use crate::scene::{AnalysisKind, ConditionMode, MassKind};
+    let m = sim.model();
+    let a = &m.analysis;
+    let dynamic = a.kind == AnalysisKind::ExplicitDynamics;
+    Contents {
+        dynamic,
+        newton: a.kind == AnalysisKind::QuasiStaticFinite,
+        condition: a.condition != ConditionMode::Off && (!dynamic || a.condition_every > 0),
+        ghost: if dynamic {
+            a.mass == MassKind::Stabilised
+        } else {
+            a.gamma_k > 0.0
+        },
+        exact: m.exact.is_some(),
+        colour: titled(colour.key(), m.units, Quantity::Field(colour)),
+        units: m.units,
+        probes: !m.probes.is_empty(),
+    }
+}
+
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
@@ -321,6 +435,11 @@ pub struct Recorder {
     points: usize,
     frames: std::collections::BTreeSet<i64>,
     steps: std::collections::BTreeSet<i64>,
+    /// Whether the error series have their names and colours (logged at
+    /// the first step with errors, when their names are known).
+    error_styles: bool,
+    /// Mark every value of a series (short runs).
+    marked: bool,
 }
 
 /// The rerun version the recordings are written with; viewers read their
@@ -374,23 +493,34 @@ impl Recorder {
             flush_num_bytes: 16 * 1024 * 1024,
             ..rerun::log::ChunkBatcherConfig::DEFAULT
         };
-        let mut builder = RecordingStreamBuilder::new(APP_ID).batcher_config(batching);
+        let name = recording_name(&sim.model().name, path);
+        let mut builder = RecordingStreamBuilder::new(APP_ID)
+            .batcher_config(batching)
+            .recording_name(name.clone());
         if deterministic {
             builder = builder.recording_id("mpmlab-test");
         }
         let rec = builder.save(path).map_err(|e| err(e.to_string()))?;
         if deterministic {
             rec.set_log_time_enabled(false);
+            // A fixed recording id leaves out rerun's properties chunk, and
+            // the name with it.
+            rec.send_recording_name(name).map_err(|e| err(e.to_string()))?;
         }
         let a = &sim.model().analysis;
         let step_dt = a.duration.map(|d| d / a.load_steps as f64);
         let plan = Plan::new(settings.cadence, sim.load_steps(), sim.points().len(), step_dt);
-        let writer = FrameWriter::start(rec.clone(), sim.model().grid.clone());
+        let colour = Field::SigmaYy;
+        let legend = ColourBar::new(
+            &sim.model().grid,
+            titled(colour.key(), sim.model().units, Quantity::Field(colour)),
+        );
+        let writer = FrameWriter::start(rec.clone(), sim.model().grid.clone(), legend.clone());
         let mut r = Recorder {
             rec,
             path: path.to_path_buf(),
             iteration: 0,
-            field: Field::SigmaYy,
+            field: colour,
             settings,
             plan,
             writer,
@@ -398,9 +528,17 @@ impl Recorder {
             points: sim.points().len(),
             frames: Default::default(),
             steps: Default::default(),
+            error_styles: false,
+            marked: sim.load_steps() <= layout::MARKED_STEPS,
         };
-        r.check(layout(sim.time().is_some()).send(&r.rec, rerun::blueprint::BlueprintActivation::default()))?;
-        r.log_static(scene_text, sim)?;
+        let contents = contents(sim, colour);
+        r.check(
+            contents
+                .blueprint()
+                .send(&r.rec, rerun::blueprint::BlueprintActivation::default()),
+        )?;
+        r.log_styles(&contents)?;
+        r.log_static(scene_text, sim, &legend)?;
         r.log_state(sim)?;
         r.event(
             &format!(
@@ -447,7 +585,46 @@ impl Recorder {
         })
     }
 
-    fn log_static(&self, scene_text: &str, sim: &Simulation) -> Result<(), RecordError> {
+    /// Names and colours of the time series (static), with markers on
+    /// every value in short runs.
+    fn log_styles_of(&self, series: &[layout::Series]) -> Result<(), RecordError> {
+        for s in series {
+            let [r, g, b] = s.color;
+            let color = rerun::Color::from_rgb(r, g, b);
+            self.check(
+                self.rec.log_static(
+                    s.path.as_str(),
+                    &rerun::SeriesLines::new()
+                        .with_names([s.name.as_str()])
+                        .with_colors([color])
+                        .with_widths([1.5]),
+                ),
+            )?;
+            if self.marked {
+                self.check(
+                    self.rec.log_static(
+                        s.path.as_str(),
+                        &rerun::SeriesPoints::new()
+                            .with_names([s.name.as_str()])
+                            .with_colors([color])
+                            .with_marker_sizes([2.5]),
+                    ),
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The series' styles and the scene's orientation (y up).
+    fn log_styles(&self, contents: &Contents) -> Result<(), RecordError> {
+        self.log_styles_of(&contents.series())?;
+        for root in layout::SCENE_ROOTS {
+            self.check(self.rec.log_static(root, &layout::y_up()))?;
+        }
+        Ok(())
+    }
+
+    fn log_static(&self, scene_text: &str, sim: &Simulation, legend: &ColourBar) -> Result<(), RecordError> {
         let doc = format!("```toml\n{scene_text}\n```");
         self.check(self.rec.log_static(
             "scene",
@@ -458,7 +635,12 @@ impl Recorder {
         self.check(self.rec.log_static(
             "recording",
             &rerun::TextDocument::new(format!(
-                "Points (positions, colours by {}, radii) {}.\n\nPer-point fields: {}.\n\nMetrics and events: every step.",
+                "Points (positions, colours by {}, radii) {}.\n\nPer-point fields: {}.\n\nMetrics and events: every step.\n\n\
+                 The scene is drawn with y up: each of its entities is flipped by a static transform, so a \
+                 point's `positions` are its true coordinates while the view's hover position has y negated.\n\n\
+                 At a step, `grid/active` (blue) are the cells the step was solved on, those of the points \
+                 at its start, with the ghost faces (orange) of that mesh; `grid/occupied` (grey) are the \
+                 cells holding the points shown, at its end.",
                 self.field.key(),
                 self.cadence(),
                 if fields.is_empty() { "none".to_string() } else { fields.join(", ") }
@@ -484,9 +666,11 @@ impl Recorder {
                 "grid",
                 &rerun::LineStrips2D::new(strips)
                     .with_colors([rerun::Color::from_rgb(90, 90, 90)])
-                    .with_radii([rerun::Radius::new_ui_points(0.5)]),
+                    .with_radii([rerun::Radius::new_ui_points(0.5)])
+                    .with_draw_order(order::GRID),
             ),
-        )
+        )?;
+        self.check(self.rec.log_static("legend/colour_bar", &legend.bar()))
     }
 
     /// Log the points (with the recorded fields), the active cells and the
@@ -525,37 +709,60 @@ impl Recorder {
         let g = &sim.model().grid;
         for b in &sim.ibm_boundaries() {
             let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
-            self.check(self.rec.log(
-                format!("ibm/{}/line", b.name),
-                &rerun::LineStrips2D::new([line]).with_colors([rerun::Color::from_rgb(40, 200, 220)]),
-            ))?;
+            self.check(
+                self.rec.log(
+                    format!("ibm/{}/line", b.name),
+                    &rerun::LineStrips2D::new([line])
+                        .with_colors([rerun::Color::from_rgb(40, 200, 220)])
+                        .with_radii([rerun::Radius::new_ui_points(2.5)])
+                        .with_labels([format!("{} (implicit Dirichlet)", b.name)])
+                        .with_draw_order(order::BOUNDARY),
+                ),
+            )?;
             let cut: Vec<[[f32; 2]; 5]> = b.cut_cells(g).iter().map(|&c| cell_box(g, c)).collect();
-            self.check(self.rec.log(
-                format!("ibm/{}/cut_cells", b.name),
-                &rerun::LineStrips2D::new(cut).with_colors([rerun::Color::from_rgb(0, 110, 120)]),
-            ))?;
+            self.check(
+                self.rec.log(
+                    format!("ibm/{}/cut_cells", b.name),
+                    &rerun::LineStrips2D::new(cut)
+                        .with_colors([rerun::Color::from_rgb(0, 110, 120)])
+                        .with_radii([rerun::Radius::new_ui_points(1.0)])
+                        .with_draw_order(order::CUT_CELLS),
+                ),
+            )?;
         }
         for ((name, spline), b) in sim.boundary_splines().into_iter().zip(&sim.model().boundaries) {
             let Some(s) = spline else { continue };
-            let color = if b.traction.is_some() {
-                rerun::Color::from_rgb(230, 80, 60)
+            // A loaded boundary: red, thicker and labelled as loaded.
+            let (color, width, label) = if b.traction.is_some() {
+                (rerun::Color::from_rgb(230, 80, 60), 3.0, format!("{name} (traction)"))
             } else {
-                rerun::Color::from_rgb(230, 230, 230)
+                (rerun::Color::from_rgb(230, 230, 230), 1.5, name.to_string())
             };
             let curve: Vec<[f32; 2]> = s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
-            self.check(self.rec.log(
-                format!("boundaries/{name}/curve"),
-                &rerun::LineStrips2D::new([curve]).with_colors([color]),
-            ))?;
+            self.check(
+                self.rec.log(
+                    format!("boundaries/{name}/curve"),
+                    &rerun::LineStrips2D::new([curve])
+                        .with_colors([color])
+                        .with_radii([rerun::Radius::new_ui_points(width)])
+                        .with_labels([label])
+                        .with_draw_order(order::BOUNDARY),
+                ),
+            )?;
             let control: Vec<[f32; 2]> = s
                 .segments
                 .iter()
                 .flat_map(|seg| seg.iter().map(|p| [p[0] as f32, p[1] as f32]))
                 .collect();
-            self.check(self.rec.log(
-                format!("boundaries/{name}/control_points"),
-                &rerun::Points2D::new(control).with_colors([rerun::Color::from_rgb(240, 200, 40)]),
-            ))?;
+            self.check(
+                self.rec.log(
+                    format!("boundaries/{name}/control_points"),
+                    &rerun::Points2D::new(control)
+                        .with_colors([rerun::Color::from_rgb(240, 200, 40)])
+                        .with_radii([rerun::Radius::new_ui_points(2.5)])
+                        .with_draw_order(order::CONTROL_POINTS),
+                ),
+            )?;
         }
         Ok(())
     }
@@ -592,8 +799,26 @@ impl Recorder {
         self.scalar("metrics/energy/plastic_dissipation", report.energy.plastic_dissipation)?;
         self.scalar("metrics/energy/strain", report.energy.strain)?;
         self.scalar("metrics/energy/external_work", report.energy.external_work)?;
+        if report.dynamics.is_none() {
+            // The quasi-static balance, the dynamic one without kinetic
+            // energy: stored and dissipated against the work done (0 up to
+            // the trapezoidal rule of the work along the load path).
+            let e = &report.energy;
+            self.scalar(
+                "metrics/energy/balance_error",
+                e.strain + e.plastic_dissipation - e.external_work,
+            )?;
+        }
+        if !self.error_styles && !report.errors.is_empty() {
+            let names: Vec<&str> = report.errors.iter().map(|e| e.name).collect();
+            self.log_styles_of(&Contents::error_series(&names))?;
+            self.error_styles = true;
+        }
         for e in &report.errors {
             self.scalar(&format!("metrics/error/{}", e.name), e.value)?;
+            if e.value > 0.0 {
+                self.scalar(&format!("metrics/log10/error/{}", e.name), e.value.log10())?;
+            }
         }
         for p in &report.probes {
             for (k, _, v) in p.columns() {
@@ -700,6 +925,25 @@ impl Recorder {
 
     fn log_residuals(&mut self, step: usize, residuals: &[f64]) -> Result<(), RecordError> {
         self.rec.set_time_sequence("step", step as i64);
+        // The step's convergence as one bar chart (log10 of each residual
+        // against its iteration), which the viewer shows for the step under
+        // the time cursor.
+        let shown: Vec<(u32, f64)> = residuals
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| **r > 0.0 && r.is_finite())
+            .map(|(k, r)| (k as u32, r.log10()))
+            .collect();
+        if !shown.is_empty() {
+            self.check(
+                self.rec.log(
+                    "metrics/newton/residual_history",
+                    &rerun::BarChart::new(shown.iter().map(|s| s.1).collect::<Vec<f64>>())
+                        .with_abscissa(shown.iter().map(|s| s.0).collect::<Vec<u32>>())
+                        .with_color(rerun::Color::from_rgb(86, 180, 233)),
+                ),
+            )?;
+        }
         for &r in residuals {
             self.iteration += 1;
             self.rec.set_time_sequence("iteration", self.iteration);

@@ -8,11 +8,61 @@
 //! | `charts/error_vs_time/runs`, `.../pareto` | Points2D / LineStrips2D in log10 coordinates, labelled by run |
 //! | `charts/error_vs_h/<group>` | LineStrips2D and Points2D, log10 coordinates |
 //! | `charts/stability` | Points2D on a grid (column: last setting, row: the others), green completed, red failed |
+//!
+//! The charts are drawn with y up (a static transform on `charts`, as for
+//! a run's scene: [`super::layout`]), and the recording is listed in the
+//! viewer as `sweep <name>`, after the sweep's folder. Its own layout
+//! ([`layout`]) shows the three charts, the per-run metrics and the
+//! summary; without one the viewer would reuse the last run's layout
+//! (recordings share the application id) and show empty panels.
 
 use super::{RecordError, APP_ID};
 use crate::sweep::{pareto_front, RunResult};
 use rerun::RecordingStreamBuilder;
 use std::path::Path;
+
+/// The sweep's layout: the charts on the left (error against h only when
+/// the sweep varies h), the summary and the per-run metrics on the right.
+fn layout(with_h: bool) -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::{
+        Blueprint, ContainerLike, Horizontal, Spatial2DView, TextDocumentView, TimeSeriesView, Vertical,
+    };
+    let mut charts: Vec<ContainerLike> =
+        vec![
+            Spatial2DView::new(format!("log10 error against log10 wall time (s), Pareto front red"))
+                .with_origin("/")
+                .with_contents(["/charts/error_vs_time/**"])
+                .into(),
+        ];
+    if with_h {
+        charts.push(
+            Spatial2DView::new(format!("log10 error against log10 h (in the scene's length unit)"))
+                .with_origin("/")
+                .with_contents(["/charts/error_vs_h/**"])
+                .into(),
+        );
+    }
+    charts.push(
+        Spatial2DView::new("stability: green completed, red failed")
+            .with_origin("/")
+            .with_contents(["/charts/stability/**"])
+            .into(),
+    );
+    let charts = Vertical::new(charts);
+    let right = Vertical::new([
+        TextDocumentView::new("summary").with_origin("/sweep/summary").into(),
+        TimeSeriesView::new("per run (x: run index)")
+            .with_origin("/runs")
+            .into(),
+    ]);
+    // The charts' views start at the root: a transform above a view's
+    // origin does not apply in it, and the y flip sits on `charts`.
+    use rerun::blueprint::components::PanelState;
+    use rerun::blueprint::{SelectionPanel, TimePanel};
+    Blueprint::new(Horizontal::new([charts.into(), right.into()]))
+        .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
+        .with_time_panel(TimePanel::new().with_state(PanelState::Collapsed).with_timeline("run"))
+}
 
 fn log10_point(x: f64, y: f64) -> Option<[f32; 2]> {
     (x > 0.0 && y > 0.0 && x.is_finite() && y.is_finite()).then(|| [x.log10() as f32, y.log10() as f32])
@@ -24,10 +74,17 @@ pub fn record_sweep(path: &Path, summary: &str, results: &[RunResult], h_key: Op
         path: path.to_path_buf(),
         message: m,
     };
+    let name = path
+        .parent()
+        .and_then(|d| d.file_name())
+        .map_or("sweep".to_string(), |d| format!("sweep {}", d.to_string_lossy()));
     let rec = RecordingStreamBuilder::new(APP_ID)
+        .recording_name(name)
         .save(path)
         .map_err(|e| err(e.to_string()))?;
     let check = |r: Result<(), rerun::RecordingStreamError>| r.map_err(|e| err(e.to_string()));
+    check(layout(h_key.is_some()).send(&rec, rerun::blueprint::BlueprintActivation::default()))?;
+    check(rec.log_static("charts", &super::layout::y_up()))?;
     check(rec.log_static(
         "sweep/summary",
         &rerun::TextDocument::new(format!("```\n{summary}\n```")).with_media_type(rerun::MediaType::markdown()),
