@@ -779,3 +779,72 @@ fn recordings_are_named_after_scene_and_run() {
         "{names:?}"
     );
 }
+
+/// Events keep their step and their order: several at one step (a
+/// parameter change before the first step logged from another thread, as
+/// the TUI's engine does; a failure, then the end of the run) stay
+/// distinct on the `event` timeline, each with its step.
+#[test]
+fn events_of_one_step_stay_distinct_with_their_step() {
+    let path = temp_path("rec-events", "rrd");
+    let sim = sim_with("column-small-strain", |_| {});
+    let text = std::fs::read_to_string(common::scene_path("column-small-strain")).unwrap();
+    let rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    // The TUI moves the recorder to its engine thread before any step.
+    let mut rec = std::thread::spawn(move || {
+        rec.event("parameter: gamma_K = 1e6 Pa from step 1", "INFO").unwrap();
+        rec.event("parameter: tolerance = 1e-9 from step 1", "INFO").unwrap();
+        rec
+    })
+    .join()
+    .unwrap();
+    let mut sim = sim;
+    let r = sim.step().unwrap();
+    rec.log_step(&r, &sim).unwrap();
+    rec.event("run complete", "INFO").unwrap();
+    rec.event("end of interactive session", "INFO").unwrap();
+    rec.finish().unwrap();
+    let text_c = rerun::TextLog::descriptor_text().component;
+    let (step_tl, event_tl): (rerun::TimelineName, rerun::TimelineName) = ("step".into(), "event".into());
+    let mut by_event: BTreeMap<i64, (i64, String)> = BTreeMap::new();
+    for c in read_chunks(&path) {
+        if c.entity_path().to_string() != "/events" {
+            continue;
+        }
+        let steps: Vec<i64> = c
+            .iter_component_indices(step_tl, text_c)
+            .map(|(t, _)| t.as_i64())
+            .collect();
+        let events: Vec<i64> = c
+            .iter_component_indices(event_tl, text_c)
+            .map(|(t, _)| t.as_i64())
+            .collect();
+        let texts: Vec<String> = c
+            .iter_slices::<String>(text_c)
+            .flat_map(|v| v.into_iter().map(|s| s.to_string()))
+            .collect();
+        assert_eq!(
+            (steps.len(), events.len()),
+            (texts.len(), texts.len()),
+            "every event has both times"
+        );
+        for ((s, e), t) in steps.into_iter().zip(events).zip(texts) {
+            assert!(by_event.insert(e, (s, t)).is_none(), "event {e} twice");
+        }
+    }
+    let _ = std::fs::remove_file(&path);
+    let got: Vec<(i64, i64, &str)> = by_event.iter().map(|(e, (s, t))| (*e, *s, t.as_str())).collect();
+    assert_eq!(got.len(), 5, "{got:?}");
+    assert!(got[0].2.starts_with("start:") && got[0].1 == 0, "{got:?}");
+    assert_eq!(
+        (got[1].1, got[2].1),
+        (0, 0),
+        "changes before step 1 belong to step 0: {got:?}"
+    );
+    assert!(
+        got[1].2.contains("gamma_K") && got[2].2.contains("tolerance"),
+        "{got:?}"
+    );
+    assert_eq!((got[3].1, got[3].2), (1, "run complete"), "{got:?}");
+    assert_eq!((got[4].1, got[4].2), (1, "end of interactive session"), "{got:?}");
+}

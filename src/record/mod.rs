@@ -38,7 +38,7 @@
 //! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics, balance `W_kin + W_eps + W_p - W_ext - W_0`; also on `time`) | every step |
 //! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (explicit dynamics) | every step |
 //! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
-//! | `events` | TextLog (start, failures, end) | as they happen |
+//! | `events` | TextLog (start, parameter changes, failures, end), each on the `step` it belongs to and numbered on the `event` timeline (several at one step stay apart) | as they happen |
 //!
 //! "Frames" are the steps the cadence picks ([`crate::model::record`]:
 //! scene `[record]`, or the command line's `--record-every`,
@@ -440,6 +440,12 @@ pub struct Recorder {
     error_styles: bool,
     /// Mark every value of a series (short runs).
     marked: bool,
+    /// The step the next event belongs to, and the events logged so far:
+    /// events carry both (the `event` timeline keeps several events of one
+    /// step apart; rerun's times are per thread, and the TUI logs from
+    /// another thread than the one that created the recorder).
+    step_now: std::cell::Cell<i64>,
+    events: std::cell::Cell<i64>,
 }
 
 /// The rerun version the recordings are written with; viewers read their
@@ -530,6 +536,8 @@ impl Recorder {
             steps: Default::default(),
             error_styles: false,
             marked: sim.load_steps() <= layout::MARKED_STEPS,
+            step_now: std::cell::Cell::new(sim.step_index() as i64),
+            events: std::cell::Cell::new(0),
         };
         let contents = contents(sim, colour);
         r.check(
@@ -703,6 +711,7 @@ impl Recorder {
             }
         }
         self.rec.set_time_sequence("step", step);
+        self.step_now.set(step);
         if let Some(t) = sim.time() {
             self.rec.set_duration_secs("time", t);
         }
@@ -784,6 +793,7 @@ impl Recorder {
     pub fn log_step(&mut self, report: &StepReport, sim: &Simulation) -> Result<(), RecordError> {
         self.log_residuals(report.step, &report.residuals)?;
         self.rec.set_time_sequence("step", report.step as i64);
+        self.step_now.set(report.step as i64);
         if let Some(d) = &report.dynamics {
             self.log_dynamics(report, d)?;
         } else if let Some(c) = &report.condition {
@@ -925,6 +935,7 @@ impl Recorder {
 
     fn log_residuals(&mut self, step: usize, residuals: &[f64]) -> Result<(), RecordError> {
         self.rec.set_time_sequence("step", step as i64);
+        self.step_now.set(step as i64);
         // The step's convergence as one bar chart (log10 of each residual
         // against its iteration), which the viewer shows for the step under
         // the time cursor.
@@ -962,13 +973,22 @@ impl Recorder {
     pub fn log_failure(&mut self, failure: &StepFailure, sim: &Simulation) -> Result<(), RecordError> {
         self.log_residuals(failure.step(), failure.residuals())?;
         self.rec.set_time_sequence("step", failure.step() as i64);
+        self.step_now.set(failure.step() as i64);
         self.event(&failure.to_string(), rerun::TextLogLevel::ERROR)?;
         self.log_state(sim)
     }
 
-    /// Log a text event at the current step.
+    /// Log a text event at the current step (the last step logged; the
+    /// state the recording started from before any), numbered on the
+    /// `event` timeline so that events of one step stay distinct.
     pub fn event(&self, text: &str, level: &str) -> Result<(), RecordError> {
-        self.check(self.rec.log("events", &rerun::TextLog::new(text).with_level(level)))
+        let n = self.events.get();
+        self.events.set(n + 1);
+        self.rec.set_time_sequence("step", self.step_now.get());
+        self.rec.set_time_sequence("event", n);
+        let logged = self.rec.log("events", &rerun::TextLog::new(text).with_level(level));
+        self.rec.disable_timeline("event");
+        self.check(logged)
     }
 
     /// Flush everything to disk and close the file; its size and what it
