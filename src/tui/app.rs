@@ -352,20 +352,37 @@ impl App {
             probe_x: 0,
             probe_y: 0,
         }
-        .with_probes(sim.probe_values(None))
+        .with_probes(sim)
     }
 
-    /// Start the probe chart on the probes' initial values: a force
-    /// against its displacement where a probe has one (a footing's load
-    /// against its settlement), else the first displacement against the
-    /// load factor.
-    fn with_probes(mut self, start: Vec<crate::probe::ProbeValue>) -> App {
-        self.probes_start = start;
-        let cols = self.probe_columns();
-        let find = |key: &str| cols.iter().position(|c| c.0.ends_with(key));
-        (self.probe_x, self.probe_y) = match (find(":fy"), find(":uy")) {
-            (Some(f), _) => (f.saturating_sub(2).max(1), f),
-            (None, Some(u)) => (0, u),
+    /// Start the probe chart on the probes' initial values: the load of an
+    /// implicit boundary that is moved against its displacement (a
+    /// footing's load against its settlement, a platen's), else the first
+    /// other probe's vertical displacement against the load factor (a
+    /// beam's tip).
+    fn with_probes(mut self, sim: &Simulation) -> App {
+        use crate::probe::ProbeTarget;
+        self.probes_start = sim.probe_values(None);
+        let m = sim.model();
+        // Column of probe k's first value (after the load factor).
+        let first: Vec<usize> = self
+            .probes_start
+            .iter()
+            .scan(1, |c, p| {
+                let at = *c;
+                *c += p.columns().len();
+                Some(at)
+            })
+            .collect();
+        let moved = m.probes.iter().position(|p| match p.target {
+            ProbeTarget::Ibm(b) => m.ibm[b].motion() != [0.0; 2],
+            _ => false,
+        });
+        let other = m.probes.iter().position(|p| !matches!(p.target, ProbeTarget::Ibm(_)));
+        // Columns: ux, uy, then fx, fy for boundaries.
+        (self.probe_x, self.probe_y) = match (moved, other.or(if m.probes.is_empty() { None } else { Some(0) })) {
+            (Some(k), _) => (first[k] + 1, first[k] + 3),
+            (None, Some(k)) => (0, first[k] + 1),
             (None, None) => (0, 0),
         };
         self
