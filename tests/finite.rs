@@ -179,13 +179,25 @@ fn column_converges_with_and_without_ghost() {
 #[test]
 fn column_error_is_insensitive_to_gamma_on_a_fine_grid() {
     // G Table 4: at h = 50/2^9 twelve orders of gamma_K/E change the error by
-    // 0.49%; assert below 1%.
+    // 0.49% (measured here 0.35%): no more than G's 0.49%.
     let e: Vec<f64> = [1e-6, 1.0, 1e6].iter().map(|g| column_error(512, g * 10.0e3)).collect();
     println!("h = 50/512, gamma/E = 1e-6, 1, 1e6: {e:?}");
     let (lo, hi) = e
         .iter()
         .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
-    assert!((hi - lo) / lo < 0.01, "{e:?}");
+    assert!((hi - lo) / lo < 0.0049, "{e:?}");
+    // At gamma_K/E = 1e-6 the penalty is a millionth of the bulk stiffness:
+    // the run is plain GIMP on G's grid, points and load steps, so it must
+    // give G's 4.938e-5 to G's digits (within half a unit of the last one;
+    // measured 4.9378e-5). With the penalty active our face set is not G's
+    // (docs/verification.md), and the other columns differ in the fourth
+    // digit (4.9365e-5 against 4.938e-5 at 1, 4.9535e-5 against 4.962e-5
+    // at 1e6).
+    assert!(
+        (e[0] - 4.938e-5).abs() < 0.0005e-5,
+        "{:e} vs G Table 4's 4.938e-5",
+        e[0]
+    );
 }
 
 /// Steps completed, total and largest Newton iterations, tip displacement.

@@ -111,8 +111,10 @@ fn ghost_face_matrix_is_g23_with_weight_h3_over_3() {
     // neighbour are the only active cells, so both are boundary cells and
     // their shared face is the whole of Gamma (G 4.2).
     for h in [1.0, 0.25] {
+        // The origin enters only where the face is drawn (below).
+        let origin = [-0.75, 1.5];
         let grid = Grid {
-            origin: [0.0, 0.0],
+            origin,
             h,
             nx: 3,
             ny: 3,
@@ -133,6 +135,16 @@ fn ghost_face_matrix_is_g23_with_weight_h3_over_3() {
                 Face::Horizontal(..) => 2 * 4 + 1,
             };
             assert!((got[(shared, shared)] - 4.0 * h * h / 9.0).abs() < 1e-15 * h * h);
+            // Where the face is drawn (TUI, recordings): the grid line
+            // i = 2 from j = 1 to 2 between cells (1, 1) and (2, 1), or
+            // j = 2 from i = 1 to 2 between (1, 1) and (1, 2). Origin and h
+            // are short binary fractions, so every sum is exact.
+            let at = |i: f64, j: f64| [origin[0] + i * h, origin[1] + j * h];
+            let want = match face {
+                Face::Vertical(..) => (at(2.0, 1.0), at(2.0, 2.0)),
+                Face::Horizontal(..) => (at(1.0, 2.0), at(2.0, 2.0)),
+            };
+            assert_eq!(ghost::face_segment(&grid, &faces[0]), want, "h {h}, {face:?}");
         }
     }
 }
@@ -371,6 +383,237 @@ fn dirichlet_function_is_c16() {
                 (dd - dwant).abs() < 1e-14 / delta,
                 "delta {delta}, phi/delta {t}: d' {dd} vs {dwant}"
             );
+        }
+    }
+}
+
+/// C (16) by hand: `d` and `d'` at signed distance `phi`.
+fn c16(phi: f64, delta: f64) -> (f64, f64) {
+    let t = phi / delta;
+    if t <= 0.0 {
+        (0.0, 0.0)
+    } else if t >= 1.0 {
+        (1.0, 0.0)
+    } else {
+        (2.0 * t - t * t, 2.0 * (1.0 - t) / delta)
+    }
+}
+
+type M2 = [[f64; 2]; 2];
+
+fn mat_mul(a: &M2, b: &M2) -> M2 {
+    let mut c = [[0.0; 2]; 2];
+    for i in 0..2 {
+        for j in 0..2 {
+            c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j];
+        }
+    }
+    c
+}
+
+fn mat_add(a: &M2, b: &M2) -> M2 {
+    [
+        [a[0][0] + b[0][0], a[0][1] + b[0][1]],
+        [a[1][0] + b[1][0], a[1][1] + b[1][1]],
+    ]
+}
+
+fn mat_close(a: &M2, b: &M2, tol: f64) -> bool {
+    (0..2).all(|i| (0..2).all(|j| (a[i][j] - b[i][j]).abs() <= tol))
+}
+
+#[test]
+fn dirichlet_matrix_of_fixed_and_roller_boundaries_is_c_section_3() {
+    // C 3 (and the ibm module's doc): with phi the distance into the
+    // material and n the inward normal (grad phi = n), a fixed boundary has
+    // D = d I and dD/dx_j = d' n_j I; a roller D = I - (1 - d) n n^T and
+    // dD/dx_j = d' n_j n n^T; several boundaries multiply, D = D_1 D_2 with
+    // the product rule for the gradient. Written out here for a horizontal
+    // boundary (material above) and one inclined at 60 degrees (material
+    // to its lower right), at points inside both bands, inside one, beyond
+    // them and outside the material; beyond a polyline's ends a boundary
+    // does not act (D = I).
+    use mpmlab::ibm::{d_total, in_band, IbmBoundary};
+    use mpmlab::scene::DirichletKind;
+    let delta = 0.5;
+    let th = 60f64.to_radians();
+    let t2 = [th.cos(), th.sin()];
+    let line = |kind, a: [f64; 2], b: [f64; 2], side: f64| IbmBoundary {
+        name: "b".into(),
+        kind,
+        points: vec![a, b],
+        side,
+        value: [0.0, 0.0],
+        gauss_points: 2,
+        exact_field: false,
+        fit_regularisation: 0.0,
+        moves: false,
+        spline: None,
+    };
+    // Inward normals: (0, 1) for the base; (sin 60, -cos 60) for the
+    // inclined line travelled from -3 t2 to 3 t2 with the material on its
+    // right (side -1).
+    let n1 = [0.0, 1.0];
+    let n2 = [th.sin(), -th.cos()];
+    let by_hand = |kind: DirichletKind, n: [f64; 2], phi: f64| -> (M2, [M2; 2]) {
+        let (d, dd) = c16(phi, delta);
+        match kind {
+            DirichletKind::Fixed => (
+                [[d, 0.0], [0.0, d]],
+                [0, 1].map(|j| [[dd * n[j], 0.0], [0.0, dd * n[j]]]),
+            ),
+            DirichletKind::Roller => {
+                let nn = [[n[0] * n[0], n[0] * n[1]], [n[1] * n[0], n[1] * n[1]]];
+                (
+                    [
+                        [1.0 - (1.0 - d) * nn[0][0], -(1.0 - d) * nn[0][1]],
+                        [-(1.0 - d) * nn[1][0], 1.0 - (1.0 - d) * nn[1][1]],
+                    ],
+                    [0, 1].map(|j| nn.map(|r| r.map(|v| dd * n[j] * v))),
+                )
+            }
+        }
+    };
+    // Points: (x, phi_1, phi_2); phi_2 = x . n2 (the line passes the origin).
+    let points: Vec<[f64; 2]> = vec![
+        [0.5, 0.2],
+        [0.9, 0.1],
+        [1.6, 0.35],
+        [0.5, 0.7],
+        [2.0, -0.1],
+        [0.3, 0.45],
+    ];
+    // Round-off of a few products of numbers of order 1/delta.
+    let tol = 1e-14;
+    for k1 in [DirichletKind::Fixed, DirichletKind::Roller] {
+        for k2 in [DirichletKind::Fixed, DirichletKind::Roller] {
+            let b1 = line(k1, [-3.0, 0.0], [3.0, 0.0], 1.0);
+            let b2 = line(k2, [-3.0 * t2[0], -3.0 * t2[1]], [3.0 * t2[0], 3.0 * t2[1]], -1.0);
+            for &x in &points {
+                let (phi1, phi2) = (x[1], x[0] * n2[0] + x[1] * n2[1]);
+                let (d1, g1) = by_hand(k1, n1, phi1);
+                let (d2, g2) = by_hand(k2, n2, phi2);
+                // Each alone.
+                for (b, d, g) in [(&b1, d1, g1), (&b2, d2, g2)] {
+                    let (dm, gm) = d_total(std::slice::from_ref(b), x, delta);
+                    assert!(mat_close(&dm, &d, tol), "{k1:?}/{k2:?} at {x:?}: D {dm:?} vs {d:?}");
+                    for j in 0..2 {
+                        assert!(
+                            mat_close(&gm[j], &g[j], tol / delta),
+                            "{x:?}: dD/dx_{j} {:?} vs {:?}",
+                            gm[j],
+                            g[j]
+                        );
+                    }
+                }
+                // Both, in the order listed.
+                let (dm, gm) = d_total(&[b1.clone(), b2.clone()], x, delta);
+                let want = mat_mul(&d1, &d2);
+                assert!(
+                    mat_close(&dm, &want, tol),
+                    "{k1:?}/{k2:?} at {x:?}: D {dm:?} vs {want:?}"
+                );
+                for j in 0..2 {
+                    let wg = mat_add(&mat_mul(&g1[j], &d2), &mat_mul(&d1, &g2[j]));
+                    assert!(
+                        mat_close(&gm[j], &wg, tol / delta),
+                        "{x:?}: dD/dx_{j} {:?} vs {wg:?}",
+                        gm[j]
+                    );
+                }
+                // In a band: 0 <= phi < delta for either.
+                let inside = |p: f64| p < delta;
+                assert_eq!(
+                    in_band(&[b1.clone(), b2.clone()], x, delta),
+                    inside(phi1) || inside(phi2),
+                    "{x:?}"
+                );
+            }
+            // Past the base's right end (x > 3), 0.1 above its line: the
+            // base does not act there (and the inclined line is 3 away).
+            let x = [3.5, 0.1];
+            let (dm, gm) = d_total(&[b1.clone(), b2.clone()], x, delta);
+            let id = [[1.0, 0.0], [0.0, 1.0]];
+            assert!(
+                mat_close(&dm, &id, 0.0) && gm.iter().all(|g| mat_close(g, &[[0.0; 2]; 2], 0.0)),
+                "{dm:?} {gm:?}"
+            );
+            assert!(!in_band(std::slice::from_ref(&b1), x, delta));
+        }
+    }
+}
+
+#[test]
+fn band_quadrature_integrates_the_strip_along_an_inclined_boundary() {
+    // The band 0 <= phi <= delta along a boundary is a strip of length L
+    // and width delta; its Gauss points (along each piece of the boundary
+    // in a cell, 3 across) must integrate polynomials in the distance
+    // along it (s) and across it (phi) exactly: int 1 = L delta,
+    // int s = L^2 delta / 2, int phi = L delta^2 / 2, int phi^2 = L delta^3 / 3,
+    // int s phi = L^2 delta^2 / 4, for a polyline of two inclined segments
+    // crossing several cells, with the material on either side.
+    use mpmlab::ibm::IbmBoundary;
+    use mpmlab::scene::DirichletKind;
+    let grid = Grid {
+        origin: [-0.5, 0.25],
+        h: 0.5,
+        nx: 6,
+        ny: 6,
+    };
+    let th = 30f64.to_radians();
+    let (a, len) = ([0.1, 0.4], 2.2);
+    let t = [th.cos(), th.sin()];
+    let b = [a[0] + len * t[0], a[1] + len * t[1]];
+    // Split into two collinear segments at an uneven point: the pieces of
+    // both together tile the line.
+    let m = [a[0] + 0.37 * len * t[0], a[1] + 0.37 * len * t[1]];
+    for side in [1.0, -1.0] {
+        let n = [-side * t[1], side * t[0]];
+        let boundary = IbmBoundary {
+            name: "b".into(),
+            kind: DirichletKind::Fixed,
+            points: vec![a, m, b],
+            side,
+            value: [0.0, 0.0],
+            gauss_points: 2,
+            exact_field: false,
+            fit_regularisation: 0.0,
+            moves: false,
+            spline: None,
+        };
+        for delta in [0.1, 0.02] {
+            let pts = boundary.band_points(&grid, delta);
+            // 2 Gauss points along each piece, 3 across; the line crosses
+            // 6 grid lines and the two segments join between them: 8 pieces.
+            assert_eq!(pts.len(), 8 * 6, "side {side}");
+            let mut mom = [0.0; 5];
+            for &(x, w) in &pts {
+                let d = [x[0] - a[0], x[1] - a[1]];
+                let (s, phi) = (d[0] * t[0] + d[1] * t[1], d[0] * n[0] + d[1] * n[1]);
+                assert!(
+                    (-1e-14..=len + 1e-14).contains(&s) && (0.0..=delta).contains(&phi),
+                    "{x:?}"
+                );
+                for (k, f) in [1.0, s, phi, phi * phi, s * phi].into_iter().enumerate() {
+                    mom[k] += w * f;
+                }
+            }
+            let want = [
+                len * delta,
+                len * len * delta / 2.0,
+                len * delta * delta / 2.0,
+                len * delta.powi(3) / 3.0,
+                len * len * delta * delta / 4.0,
+            ];
+            for k in 0..5 {
+                // Exact quadrature: round-off of a sum of ~40 terms.
+                assert!(
+                    (mom[k] - want[k]).abs() < 1e-14 * want[k],
+                    "side {side}, delta {delta}, moment {k}: {} vs {}",
+                    mom[k],
+                    want[k]
+                );
+            }
         }
     }
 }
