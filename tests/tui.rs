@@ -237,6 +237,41 @@ fn sweep_view_shows_runs_and_charts() {
         })
         .sum();
     assert!(marks > 5, "{all}");
+    // A sweep that keeps h (the delta preset): error and condition number
+    // against the setting it varies. C: the error falls in proportion to
+    // delta/h while cond(K) grows as 1/delta.
+    let run = |d: f64| RunResult {
+        id: format!("delta_over_h={d}"),
+        settings: vec![("delta_over_h".into(), d.to_string())],
+        completed: true,
+        wall_s: 1e-3,
+        errors: vec![("displacement_l2".into(), 0.3 * d)],
+        condition: 1e3 / d,
+        ..Default::default()
+    };
+    let view = SweepView {
+        title: "delta".into(),
+        results: vec![run(1e-1), run(1e-2), run(1e-3)],
+        scroll: 0,
+    };
+    let mut t = Terminal::new(TestBackend::new(160, 48)).unwrap();
+    t.draw(|f| draw_sweep(f, &view)).unwrap();
+    let buf = t.backend().buffer().clone();
+    let all: String = (0..buf.area.height)
+        .map(|y| {
+            (0..buf.area.width)
+                .map(|x| buf[(x, y)].symbol().to_string())
+                .collect::<String>()
+                + "\n"
+        })
+        .collect();
+    assert!(
+        all.contains("displacement_l2 (lines) and cond(K) (dots) against delta_over_h"),
+        "{all}"
+    );
+    assert!(!all.contains("not varied"), "{all}");
+    // The error's observed rate against delta/h: exactly 1.
+    assert!(all.contains("rate 1.00"), "{all}");
 }
 
 #[test]

@@ -44,6 +44,26 @@ impl SweepView {
             .find(|k| self.results.iter().any(|r| r.setting(k).is_some()))
     }
 
+    /// The setting the convergence chart is drawn against: h where the
+    /// sweep varies it, else the first setting that takes several positive
+    /// values (delta/h, gamma_K, steps, ...).
+    fn axis_key(&self) -> Option<String> {
+        if let Some(h) = self.h_key() {
+            return Some(h.to_string());
+        }
+        let keys: Vec<String> = self
+            .results
+            .iter()
+            .flat_map(|r| r.settings.iter().map(|s| s.0.clone()))
+            .collect();
+        keys.into_iter().find(|k| {
+            let mut vals: Vec<f64> = self.results.iter().filter_map(|r| r.setting(k)).collect();
+            vals.sort_by(f64::total_cmp);
+            vals.dedup();
+            vals.len() >= 2 && vals.iter().all(|v| *v > 0.0)
+        })
+    }
+
     fn error_name(&self) -> String {
         self.results
             .iter()
@@ -228,26 +248,44 @@ fn draw_time_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
     );
 }
 
+/// The error (lines, with the observed rate) and the condition number
+/// (dots) of the completed runs against h, or against the setting the
+/// sweep varies when it keeps h (delta/h, gamma_K, ...), log-log.
 fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
-    let block = Block::default()
-        .borders(Borders::ALL)
-        .title(format!(" {} against h (log-log) ", v.error_name()));
-    let Some(h) = v.h_key() else {
-        frame.render_widget(Paragraph::new("h is not varied in this sweep").block(block), area);
+    let Some(key) = v.axis_key() else {
+        let block = Block::default()
+            .borders(Borders::ALL)
+            .title(format!(" {} against h (log-log) ", v.error_name()));
+        frame.render_widget(
+            Paragraph::new("no setting takes several positive values in this sweep").block(block),
+            area,
+        );
         return;
     };
-    // Each group's points from fine to coarse (log10 h, log10 error).
-    let groups: Vec<(String, Vec<(f64, f64)>)> = crate::sweep::groups_without(&v.results, h)
-        .into_iter()
-        .map(|(label, g)| {
-            let mut pts: Vec<(f64, f64)> = g
-                .iter()
-                .filter_map(|r| Some((lg(r.setting(h)?)?, lg(r.error()?)?)))
-                .collect();
-            pts.reverse();
-            (label, pts)
-        })
-        .collect();
+    let h = key.as_str();
+    let block = Block::default().borders(Borders::ALL).title(format!(
+        " {} (lines) and cond(K) (dots) against {h} (log-log) ",
+        v.error_name()
+    ));
+    // Each group's points from fine to coarse (log10 setting, log10 error),
+    // then its condition numbers.
+    let mut groups: Vec<(String, Vec<(f64, f64)>, bool)> = Vec::new();
+    for (label, g) in crate::sweep::groups_without(&v.results, h) {
+        let mut pts: Vec<(f64, f64)> = g
+            .iter()
+            .filter_map(|r| Some((lg(r.setting(h)?)?, lg(r.error()?)?)))
+            .collect();
+        pts.reverse();
+        let mut cond: Vec<(f64, f64)> = g
+            .iter()
+            .filter_map(|r| Some((lg(r.setting(h)?)?, lg(r.condition)?)))
+            .collect();
+        cond.reverse();
+        groups.push((label.clone(), pts, false));
+        if !cond.is_empty() {
+            groups.push((format!("cond, {label}"), cond, true));
+        }
+    }
     let xs: Vec<f64> = groups.iter().flat_map(|g| g.1.iter().map(|p| p.0)).collect();
     let ys: Vec<f64> = groups.iter().flat_map(|g| g.1.iter().map(|p| p.1)).collect();
     let (xb, xl) = axis(&xs);
@@ -263,7 +301,15 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
     let data: Vec<Dataset> = groups
         .iter()
         .enumerate()
-        .map(|(k, (label, pts))| {
+        .map(|(k, (label, pts, cond))| {
+            if *cond {
+                return Dataset::default()
+                    .name(label.clone())
+                    .marker(Marker::Dot)
+                    .graph_type(GraphType::Scatter)
+                    .style(Style::new().fg(Color::Gray))
+                    .data(pts);
+            }
             let rate = match (pts.first(), pts.last()) {
                 (Some(a), Some(b)) if b.0 != a.0 => format!(" (rate {:.2})", (b.1 - a.1) / (b.0 - a.0)),
                 _ => String::new(),
