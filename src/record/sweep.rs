@@ -29,14 +29,14 @@ fn layout(with_h: bool) -> rerun::blueprint::Blueprint {
     };
     let mut charts: Vec<ContainerLike> =
         vec![
-            Spatial2DView::new(format!("log10 error against log10 wall time (s), Pareto front red"))
+            Spatial2DView::new("log10 error against log10 wall time (s), Pareto front red")
                 .with_origin("/")
                 .with_contents(["/charts/error_vs_time/**"])
                 .into(),
         ];
     if with_h {
         charts.push(
-            Spatial2DView::new(format!("log10 error against log10 h (in the scene's length unit)"))
+            Spatial2DView::new("log10 error against log10 h (in the scene's length unit)")
                 .with_origin("/")
                 .with_contents(["/charts/error_vs_h/**"])
                 .into(),

@@ -269,7 +269,9 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
     ));
     // Each group's points from fine to coarse (log10 setting, log10 error),
     // then its condition numbers.
-    let mut groups: Vec<(String, Vec<(f64, f64)>, bool)> = Vec::new();
+    /// A series: its name, its points, and whether it is a condition number.
+    type Series = (String, Vec<(f64, f64)>, bool);
+    let mut groups: Vec<Series> = Vec::new();
     for (label, g) in crate::sweep::groups_without(&v.results, h) {
         let mut pts: Vec<(f64, f64)> = g
             .iter()
