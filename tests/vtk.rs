@@ -7,6 +7,8 @@
 //! Without python3 and meshio these tests fail when `CI` is set (`.ci/run`
 //! installs meshio) and are skipped with a message otherwise.
 
+mod common;
+use common::mpmlab;
 use mpmlab::field::Field;
 use mpmlab::scene::Scene;
 use mpmlab::{Model, Simulation};
@@ -22,19 +24,6 @@ fn temp_dir(stem: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("mpmlab-vtk-{stem}-{}-{nanos}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn mpmlab(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpmlab"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// A shipped scene's text with replacements (each must apply).
