@@ -46,7 +46,7 @@ fn small_sweep_table_rates_restart_and_charts() {
     let header = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
     let header = header.lines().next().unwrap();
     assert!(
-        header.starts_with("id,set:h,set:ppc,completed,steps_done,steps_total,failed_step,failure,wall_s,assembly_s,factorisation_s,solve_s,condition_s,unknowns,iterations,peak_rss_kb,condition,mapping_s,pattern_s,update_s,negative_pivots,cutbacks,error:"),
+        header.starts_with("id,set:h,set:ppc,completed,steps_done,steps_total,failed_step,failure,wall_s,assembly_s,factorisation_s,solve_s,condition_s,unknowns,iterations,peak_rss_kb,condition,mapping_s,pattern_s,update_s,negative_pivots,cutbacks,repeats,error:"),
         "{header}"
     );
     // Values: the G (31) error of the confined column is exactly h/(4H)
@@ -55,6 +55,9 @@ fn small_sweep_table_rates_restart_and_charts() {
         assert!(r.completed && r.failure.is_empty(), "{r:?}");
         assert!((error(r, "syy_normalised") / e - 1.0).abs() < 1e-9, "{r:?}");
         assert!(r.wall_s > 0.0 && r.unknowns > 0 && r.iterations == 1);
+        // Millisecond runs are timed as the fastest of several (else the
+        // machine's noise would decide the Pareto front).
+        assert_eq!(r.repeats, mpmlab::sweep::REPEATS, "{r:?}");
     }
     assert_eq!(
         rows[0].settings,
@@ -280,6 +283,8 @@ fn recorded_sweep_reports_recording_sizes() {
         assert_eq!(r.record_bytes, bytes, "{r:?}");
         assert!((r.record_bytes_per_step - bytes as f64 / r.steps_total as f64).abs() < 1e-6 * bytes as f64);
         assert!(r.record_bytes_per_point > 0.0, "{r:?}");
+        // A recorded run is run once (its recording is its time).
+        assert_eq!(r.repeats, 1, "{r:?}");
     }
     let header = std::fs::read_to_string(dir.join("sweep.csv")).unwrap();
     assert!(
@@ -287,7 +292,7 @@ fn recorded_sweep_reports_recording_sizes() {
             .lines()
             .next()
             .unwrap()
-            .contains(",cutbacks,record_bytes,record_bytes_per_step,record_bytes_per_point,error:"),
+            .contains(",cutbacks,repeats,record_bytes,record_bytes_per_step,record_bytes_per_point,error:"),
         "{header}"
     );
     let _ = std::fs::remove_dir_all(&dir);

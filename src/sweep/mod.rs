@@ -294,6 +294,9 @@ pub struct RunResult {
     pub iterations: usize,
     /// Peak resident memory of the process that ran it (kB; 0 when unknown).
     pub peak_rss_kb: u64,
+    /// How many runs the times are the fastest of (short runs repeat,
+    /// [`SHORT_RUN_S`]).
+    pub repeats: usize,
     /// Condition number of the last step (NaN when not computed).
     pub condition: f64,
     /// Errors against the exact solution after the last completed step.
@@ -334,15 +337,40 @@ pub fn run_file(path: &Path) -> RunResult {
 /// settings) when given; the row then holds the recording's size.
 pub fn run_file_recorded(path: &Path, record: Option<&Path>) -> RunResult {
     let text = std::fs::read_to_string(path).unwrap_or_default();
-    let (id, settings) = read_header(&text);
+    let file = path.display().to_string();
+    let mut r = run_text(&text, &file, record);
+    // A run of milliseconds is timed mostly by the machine's noise, which
+    // would then decide the Pareto front: time short runs (unrecorded) as
+    // the fastest of up to REPEATS.
+    if r.completed && record.is_none() {
+        while r.repeats < REPEATS && r.wall_s < SHORT_RUN_S {
+            let again = run_text(&text, &file, None);
+            if again.completed && again.wall_s < r.wall_s {
+                r.take_timings(&again);
+            }
+            r.repeats += 1;
+        }
+    }
+    r.peak_rss_kb = peak_rss_kb();
+    r
+}
+
+/// Runs shorter than this (s) are repeated and timed as the fastest.
+pub const SHORT_RUN_S: f64 = 0.5;
+/// Most runs a short run's time is the fastest of.
+pub const REPEATS: usize = 5;
+
+/// One run of a scene's text, to the end or the first failure.
+fn run_text(text: &str, file: &str, record: Option<&Path>) -> RunResult {
+    let (id, settings) = read_header(text);
     let mut r = RunResult {
         id,
         settings,
         condition: f64::NAN,
+        repeats: 1,
         ..Default::default()
     };
-    let file = path.display().to_string();
-    let sim = Scene::parse(&text, &file).and_then(|s| Model::build(&s, &text, &file));
+    let sim = Scene::parse(text, file).and_then(|s| Model::build(&s, text, file));
     let mut sim = match sim {
         Ok(m) => Simulation::new(m),
         Err(e) => {
@@ -354,7 +382,7 @@ pub fn run_file_recorded(path: &Path, record: Option<&Path>) -> RunResult {
     r.steps_total = sim.load_steps();
     let start = Instant::now();
     let never = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let mut recorder = match record.map(|p| crate::record::Recorder::create(p, &text, &sim, false)) {
+    let mut recorder = match record.map(|p| crate::record::Recorder::create(p, text, &sim, false)) {
         Some(Err(e)) => {
             r.failure = format!("recording: {e}");
             return r;
@@ -380,7 +408,6 @@ pub fn run_file_recorded(path: &Path, record: Option<&Path>) -> RunResult {
     }
     r.wall_s = start.elapsed().as_secs_f64();
     r.completed = sim.finished() && r.failed_step == 0;
-    r.peak_rss_kb = peak_rss_kb();
     r
 }
 
@@ -438,6 +465,7 @@ pub const COLUMNS: &[&str] = &[
     "update_s",
     "negative_pivots",
     "cutbacks",
+    "repeats",
 ];
 
 fn num(v: f64) -> String {
@@ -476,6 +504,7 @@ impl RunResult {
             num(self.update_s),
             self.negative_pivots.to_string(),
             self.cutbacks.to_string(),
+            self.repeats.to_string(),
         ];
         for (c, v) in COLUMNS.iter().zip(vals) {
             f.push((c.to_string(), v));
@@ -530,6 +559,7 @@ impl RunResult {
             update_s: x("update_s"),
             negative_pivots: s("negative_pivots").parse().unwrap_or(-1),
             cutbacks: n("cutbacks"),
+            repeats: n("repeats").max(1),
             errors: order
                 .iter()
                 .filter_map(|c| c.strip_prefix("error:").map(|k| (k.to_string(), x(c))))
@@ -544,6 +574,18 @@ impl RunResult {
             record_bytes_per_step: x("record_bytes_per_step"),
             record_bytes_per_point: x("record_bytes_per_point"),
         }
+    }
+
+    /// Take the times of `other`, a faster run of the same scene.
+    fn take_timings(&mut self, other: &RunResult) {
+        self.wall_s = other.wall_s;
+        self.assembly_s = other.assembly_s;
+        self.factorisation_s = other.factorisation_s;
+        self.solve_s = other.solve_s;
+        self.condition_s = other.condition_s;
+        self.mapping_s = other.mapping_s;
+        self.pattern_s = other.pattern_s;
+        self.update_s = other.update_s;
     }
 
     /// The cost charts and the Pareto front use: wall time without the
