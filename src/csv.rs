@@ -214,18 +214,8 @@ pub fn columns(r: &StepReport, u: Units) -> Vec<(String, String)> {
             num(b.length),
         ));
     }
-    let t = &r.timings;
-    for (name, v) in [
-        ("time_mapping", t.mapping),
-        ("time_pattern", t.pattern),
-        ("time_assembly", t.assembly),
-        ("time_factorisation", t.factorisation),
-        ("time_solve", t.solve),
-        ("time_condition", t.condition),
-        ("time_update", t.update),
-        ("time_total", t.total),
-    ] {
-        c.push((format!("{name} [s]"), num(v)));
+    for (name, v) in r.timings.named() {
+        c.push((format!("time_{name} [s]"), num(v)));
     }
     for p in &r.probes {
         for (k, q, v) in p.columns() {

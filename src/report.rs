@@ -41,6 +41,21 @@ impl Timings {
         self.total += o.total;
     }
 
+    /// Every phase and the total by name (s), in the order tables list
+    /// them.
+    pub fn named(&self) -> [(&'static str, f64); 8] {
+        [
+            ("mapping", self.mapping),
+            ("pattern", self.pattern),
+            ("assembly", self.assembly),
+            ("factorisation", self.factorisation),
+            ("solve", self.solve),
+            ("condition", self.condition),
+            ("update", self.update),
+            ("total", self.total),
+        ]
+    }
+
     /// The time not in any phase (s).
     pub fn other(&self) -> f64 {
         self.total

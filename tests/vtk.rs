@@ -26,6 +26,25 @@ fn temp_dir(stem: &str) -> PathBuf {
     d
 }
 
+/// Write `text` as a scene in `dir` and run it with a series into
+/// `dir/series` every `every` steps: the folder, exit code, stdout, stderr.
+fn run_series(dir: &Path, text: &str, every: usize) -> (PathBuf, i32, String, String) {
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, text).unwrap();
+    let out = dir.join("series");
+    let every = every.to_string();
+    let (code, stdout, err) = mpmlab(&[
+        "run",
+        scene.to_str().unwrap(),
+        "--quiet",
+        "--vtk",
+        out.to_str().unwrap(),
+        "--vtk-every",
+        &every,
+    ]);
+    (out, code, stdout, err)
+}
+
 /// A shipped scene's text with replacements (each must apply).
 fn scene_text(name: &str, edits: &[(&str, &str)]) -> String {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("scenarios/{name}.toml"));
@@ -262,18 +281,7 @@ fn explicit_dynamics_series_is_on_simulated_time_at_a_cadence() {
             ("load_steps = 1000", "load_steps = 10"),
         ],
     );
-    let scene = dir.join("short.toml");
-    std::fs::write(&scene, &text).unwrap();
-    let out = dir.join("series");
-    let (code, stdout, err) = mpmlab(&[
-        "run",
-        scene.to_str().unwrap(),
-        "--quiet",
-        "--vtk",
-        out.to_str().unwrap(),
-        "--vtk-every",
-        "4",
-    ]);
+    let (out, code, stdout, err) = run_series(&dir, &text, 4);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("4 states"), "{stdout}");
     let Some(r) = read(&out) else { return };
@@ -304,18 +312,7 @@ fn a_failed_run_ends_its_series_on_the_last_good_state() {
         "elastic-beam-ghost",
         &[("h = 0.5", "h = 0.25"), ("gamma_k = 12.0e6", "gamma_k = 0.0")],
     );
-    let scene = dir.join("beam.toml");
-    std::fs::write(&scene, &text).unwrap();
-    let out = dir.join("series");
-    let (code, _, err) = mpmlab(&[
-        "run",
-        scene.to_str().unwrap(),
-        "--quiet",
-        "--vtk",
-        out.to_str().unwrap(),
-        "--vtk-every",
-        "5",
-    ]);
+    let (out, code, _, err) = run_series(&dir, &text, 5);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("step 13 failed"), "{err}");
     let Some(r) = read(&out) else { return };

@@ -835,17 +835,7 @@ impl Recorder {
                 self.scalar(&format!("metrics/probe/{}/{k}", p.name), v)?;
             }
         }
-        let t = &report.timings;
-        for (name, v) in [
-            ("mapping", t.mapping),
-            ("pattern", t.pattern),
-            ("assembly", t.assembly),
-            ("factorisation", t.factorisation),
-            ("solve", t.solve),
-            ("condition", t.condition),
-            ("update", t.update),
-            ("total", t.total),
-        ] {
+        for (name, v) in report.timings.named() {
             self.scalar(&format!("metrics/time/{name}"), v)?;
         }
         self.scalar("metrics/unknowns", report.unknowns as f64)?;
