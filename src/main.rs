@@ -935,6 +935,12 @@ struct SweepArgs {
     /// the CSV then holds the recording's size per step and per point.
     #[arg(long)]
     record: bool,
+    /// Require a refinement study: `--vary h=...` with three or more cell
+    /// sizes, from which every probe and energy gets its observed order,
+    /// Richardson-extrapolated value and grid convergence index (also
+    /// computed, without this flag, whenever h takes three values).
+    #[arg(long)]
+    estimate: bool,
     /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     collect: Option<PathBuf>,
@@ -1067,6 +1073,21 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
     }
     if varies.is_empty() {
         anyhow::bail!("nothing to vary: give --vary KEY=V1,V2,...");
+    }
+    if a.estimate {
+        let sizes = |v: &Vary| {
+            let mut x: Vec<String> = v.values.clone();
+            x.sort();
+            x.dedup();
+            x.len()
+        };
+        if !varies
+            .iter()
+            .any(|v| (v.key == "h" || v.key == "grid.h") && sizes(v) >= 3)
+        {
+            eprintln!("error: --estimate needs a refinement study: --vary h=V1,V2,V3 (three or more cell sizes)");
+            return Ok(ExitCode::from(2));
+        }
     }
     // The base scene must be valid before anything is written.
     let base = match mpmlab::scene::read_scene_text(&path) {

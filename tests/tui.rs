@@ -237,6 +237,41 @@ fn sweep_view_shows_runs_and_charts() {
         })
         .sum();
     assert!(marks > 5, "{all}");
+    // Probes on three refinements get an estimates panel: tip = 2 - h^2
+    // (exact 2) has order 2, an estimated error 0.0625 equal to the true
+    // one (est/true 1.00).
+    let probed = |h: f64| RunResult {
+        probes: vec![("tip:uy".into(), 2.0 - h * h)],
+        exact: vec![("probe:tip:uy".into(), 2.0)],
+        ..run(h, 0.1 * h, h, true)
+    };
+    let estimated = SweepView {
+        title: "demo".into(),
+        results: vec![probed(1.0), probed(0.5), probed(0.25)],
+        scroll: 0,
+    };
+    for (w, hgt) in [(100, 30), (160, 48)] {
+        let mut t = Terminal::new(TestBackend::new(w, hgt)).unwrap();
+        t.draw(|f| draw_sweep(f, &estimated)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let all: String = (0..buf.area.height)
+            .map(|y| {
+                (0..buf.area.width)
+                    .map(|x| buf[(x, y)].symbol().to_string())
+                    .collect::<String>()
+                    + "\n"
+            })
+            .collect();
+        assert!(all.contains("error estimates at h = 0.25"), "{all}");
+        let row = all
+            .lines()
+            .find(|l| l.contains("tip:uy"))
+            .unwrap_or_else(|| panic!("{all}"));
+        assert!(
+            row.contains("2.00") && row.contains("7.81e-2") && row.contains("1.00"),
+            "{row}"
+        );
+    }
     // A sweep that keeps h (the delta preset): error and condition number
     // against the setting it varies. C: the error falls in proportion to
     // delta/h while cond(K) grows as 1/delta.

@@ -68,6 +68,7 @@ pub(super) fn build(
         probes.push(Probe {
             name: name.to_string(),
             target,
+            at: spec.at,
         });
     }
     Ok(probes)

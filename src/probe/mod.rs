@@ -33,6 +33,9 @@ pub enum ProbeTarget {
 pub struct Probe {
     pub name: String,
     pub target: ProbeTarget,
+    /// The position asked for (`at`), for a point probe: its values tend
+    /// to the field's at this position as the points are refined.
+    pub at: Option<P2>,
 }
 
 /// A probe's values at a state.

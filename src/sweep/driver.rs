@@ -5,7 +5,7 @@
 //! a summary and draw the charts.
 
 use super::svg::{self, Series, PALETTE};
-use super::{expand, pareto_front, rates, run_scene, to_csv, Folder, Run, RunResult, Vary};
+use super::{estimate, expand, pareto_front, rates, run_scene, to_csv, Folder, Run, RunResult, Vary};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
@@ -166,10 +166,24 @@ pub fn finish(folder: &Folder, title: &str) -> Result<String, String> {
     if order.is_empty() {
         results.extend(all.into_values());
     }
+    let h = h_key(&results);
+    let est = h.as_deref().map_or(Vec::new(), |h| estimate::estimates(&results, h));
+    attach_estimates(&mut results, &est);
     let p = folder.csv();
     std::fs::write(&p, to_csv(&results)).map_err(|e| io("cannot write", &p, e))?;
-    let charts = draw(folder, title, &results)?;
+    let mut charts = draw(folder, title, &results)?;
     let mut s = summary(&results);
+    if let (Some(h), false) = (&h, est.is_empty()) {
+        let e = folder.0.join("estimates.csv");
+        std::fs::write(&e, estimate::to_csv(&est)).map_err(|x| io("cannot write", &e, x))?;
+        let _ = write!(s, "\n{}", estimate::summary(&est, h));
+        let _ = writeln!(s, "estimates: {}", e.display());
+        if let Some(svg) = estimate_chart(title, h, &results, &est) {
+            let c = folder.charts().join("estimates_vs_h.svg");
+            std::fs::write(&c, svg).map_err(|x| io("cannot write", &c, x))?;
+            charts.push(c);
+        }
+    }
     let rrd = folder.0.join("sweep.rrd");
     crate::record::sweep::record_sweep(&rrd, &s, &results, h_key(&results).as_deref()).map_err(|e| e.to_string())?;
     let _ = writeln!(s, "table: {}", p.display());
@@ -178,6 +192,93 @@ pub fn finish(folder: &Folder, title: &str) -> Result<String, String> {
     }
     let _ = writeln!(s, "recording: {}  (replay: rerun {})", rrd.display(), rrd.display());
     Ok(s)
+}
+
+/// Put each estimate's order, extrapolated value and GCI on the row of its
+/// finest run (columns `estimate:<quantity>:<order|extrapolated|gci>`).
+fn attach_estimates(results: &mut [RunResult], est: &[estimate::Estimate]) {
+    for e in estimate::finest(est) {
+        if let Some(r) = results.iter_mut().find(|r| r.id == e.ids[0]) {
+            for (k, v) in [("order", e.order), ("extrapolated", e.extrapolated), ("gci", e.gci)] {
+                r.estimates.push((format!("{}:{k}", e.quantity), v));
+            }
+        }
+    }
+}
+
+/// Estimated error (the fine run's `|phi - phi_ext|` of each triple)
+/// against h per quantity, with the true error where the scene knows the
+/// exact value: the chart that shows where the estimate can be trusted.
+fn estimate_chart(title: &str, h: &str, results: &[RunResult], est: &[estimate::Estimate]) -> Option<String> {
+    let mut quantities: Vec<(&str, &str)> = Vec::new();
+    for e in est.iter().filter(|e| e.error.is_finite() && e.error > 0.0) {
+        if !quantities.contains(&(e.group.as_str(), e.quantity.as_str())) {
+            quantities.push((&e.group, &e.quantity));
+        }
+    }
+    // Those with an exact value first; at most six curves of each kind.
+    quantities.sort_by_key(|(g, q)| {
+        !est.iter()
+            .any(|e| e.group == *g && e.quantity == *q && e.exact.is_some())
+    });
+    quantities.truncate(6);
+    let mut series = Vec::new();
+    for (k, (g, q)) in quantities.iter().enumerate() {
+        let name = if *g == "runs" {
+            q.to_string()
+        } else {
+            format!("{g} {q}")
+        };
+        let color = PALETTE[k % PALETTE.len()];
+        let mut pts: Vec<(f64, f64, String)> = est
+            .iter()
+            .filter(|e| e.group == *g && e.quantity == *q && e.error.is_finite() && e.error > 0.0)
+            .map(|e| {
+                (
+                    e.h[0],
+                    e.error,
+                    format!("{}: estimated {:.3e} ({})", e.ids[0], e.error, e.behaviour.label()),
+                )
+            })
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        series.push(Series {
+            name: format!("{name} estimated"),
+            points: pts,
+            color,
+            line: true,
+        });
+        let truth: Vec<(f64, f64, String)> = super::groups_without(results, h)
+            .into_iter()
+            .filter(|(label, _)| label == g)
+            .flat_map(|(_, runs)| runs)
+            .filter_map(|r| {
+                let v = r.quantities().into_iter().find(|(n, _)| n == q)?.1;
+                let t = (v - r.exact_value(q)?).abs();
+                let x = r.setting(h)?;
+                (t > 0.0).then(|| (x, t, format!("{}: true error {t:.3e}", r.id)))
+            })
+            .collect();
+        if !truth.is_empty() {
+            series.push(Series {
+                name: format!("{name} true"),
+                points: truth,
+                color,
+                line: false,
+            });
+        }
+    }
+    if series.is_empty() {
+        return None;
+    }
+    Some(svg::chart(
+        &format!("{title}: estimated error against {h} (lines) and true error (dots)"),
+        h,
+        "error",
+        &series,
+        true,
+        true,
+    ))
 }
 
 /// The summary table, observed rates and the Pareto front.

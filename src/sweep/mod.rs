@@ -10,14 +10,16 @@
 //! | `runs/<id>.toml` | the scene of each run, with its settings in a first-line comment |
 //! | `results/<id>.csv` | one run's result (header and one row), written by `mpmlab sweep-run` |
 //! | `sweep.csv` | every result, in run order: the table to read |
+//! | `estimates.csv` | error estimates from three successive refinements of h ([`estimate`]) |
 //! | `jobs.txt` | with `--emit-jobs`: one command per run, for GNU parallel or a Slurm array |
-//! | `charts/*.svg` | error against wall time (Pareto front marked), error against h, stability map |
+//! | `charts/*.svg` | error against wall time (Pareto front marked), error against h, estimated (and true) errors against h, stability map |
 //! | `sweep.rrd` | the same as a rerun recording ([`crate::record::sweep`]) |
 //!
 //! Runs whose result exists are not run again, so an interrupted sweep
 //! resumes, and results computed elsewhere are merged by `--collect`.
 
 pub mod driver;
+pub mod estimate;
 pub mod presets;
 pub mod svg;
 
@@ -304,6 +306,17 @@ pub struct RunResult {
     /// The scene's probes after the last completed step, as
     /// `(<name>:<key>, value)` (columns `probe:<name>:<key>`).
     pub probes: Vec<(String, f64)>,
+    /// Strain energy and external work after the last completed step, as
+    /// `(strain | external_work, value)` (columns `energy:<name>`).
+    pub energies: Vec<(String, f64)>,
+    /// Exact values of quantities where the scene has an exact solution:
+    /// a point probe's field at the position it asks for, keyed as the
+    /// quantity (`probe:<name>:<key>`; columns `exact:probe:<name>:<key>`).
+    pub exact: Vec<(String, f64)>,
+    /// Error estimates of the finest run of a refinement triple
+    /// ([`estimate`]), as `(<quantity>:<order|extrapolated|gci>, value)`
+    /// (columns `estimate:...`; derived by the sweep, not read back).
+    pub estimates: Vec<(String, f64)>,
     /// The run's recording (`sweep --record`): bytes, bytes per step and
     /// per point per step holding points (columns only when recorded).
     pub record_bytes: u64,
@@ -413,7 +426,7 @@ fn run_text(text: &str, file: &str, record: Option<&Path>) -> RunResult {
 
 /// A run's row follows its steps through the runner.
 impl Observer for RunResult {
-    fn stepped(&mut self, _sim: &Simulation, rep: &crate::simulation::StepReport) -> Option<String> {
+    fn stepped(&mut self, sim: &Simulation, rep: &crate::simulation::StepReport) -> Option<String> {
         let t = rep.timings;
         self.assembly_s += t.assembly;
         self.factorisation_s += t.factorisation;
@@ -435,9 +448,34 @@ impl Observer for RunResult {
             .iter()
             .flat_map(|p| p.columns().into_iter().map(|(k, _, v)| (format!("{}:{k}", p.name), v)))
             .collect();
+        self.energies = vec![
+            ("strain".into(), rep.energy.strain),
+            ("external_work".into(), rep.energy.external_work),
+        ];
+        self.exact = exact_probes(sim.model(), rep.load_factor);
         self.steps_done = rep.step;
         None
     }
+}
+
+/// The exact values of a model's point probes at `load_factor`, keyed
+/// `probe:<name>:<key>` (none without an exact solution; components the
+/// solution does not give are left out).
+fn exact_probes(model: &Model, load_factor: f64) -> Vec<(String, f64)> {
+    let Some(exact) = &model.exact else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for p in &model.probes {
+        let Some(at) = p.at else { continue };
+        let (s, u) = exact.fields(at, load_factor);
+        for (k, v) in [("ux", u[0]), ("uy", u[1]), ("sxx", s[0]), ("syy", s[1]), ("sxy", s[2])] {
+            if v.is_finite() {
+                out.push((format!("probe:{}:{k}", p.name), v));
+            }
+        }
+    }
+    out
 }
 
 fn one_line(f: &StepFailure) -> String {
@@ -515,6 +553,15 @@ impl RunResult {
         for (n, v) in &self.probes {
             f.push((format!("probe:{n}"), num(*v)));
         }
+        for (n, v) in &self.energies {
+            f.push((format!("energy:{n}"), num(*v)));
+        }
+        for (n, v) in &self.exact {
+            f.push((format!("exact:{n}"), num(*v)));
+        }
+        for (n, v) in &self.estimates {
+            f.push((format!("estimate:{n}"), num(*v)));
+        }
         if self.record_bytes > 0 {
             let vals = [
                 self.record_bytes.to_string(),
@@ -570,6 +617,9 @@ impl RunResult {
                 .filter_map(|c| c.strip_prefix("probe:").map(|k| (k.to_string(), x(c))))
                 .filter(|(_, v)| !v.is_nan())
                 .collect(),
+            energies: prefixed(f, order, "energy:"),
+            exact: prefixed(f, order, "exact:"),
+            estimates: Vec::new(),
             record_bytes: s("record_bytes").parse().unwrap_or(0),
             record_bytes_per_step: x("record_bytes_per_step"),
             record_bytes_per_point: x("record_bytes_per_point"),
@@ -599,6 +649,19 @@ impl RunResult {
         self.errors.first().map(|e| e.1).filter(|e| e.is_finite())
     }
 
+    /// The quantities a refinement study can estimate the error of:
+    /// probes (`probe:<name>:<key>`) and energies (`energy:<name>`).
+    pub fn quantities(&self) -> Vec<(String, f64)> {
+        let probes = self.probes.iter().map(|(n, v)| (format!("probe:{n}"), *v));
+        let energies = self.energies.iter().map(|(n, v)| (format!("energy:{n}"), *v));
+        probes.chain(energies).filter(|(_, v)| v.is_finite()).collect()
+    }
+
+    /// The exact value of a quantity of [`RunResult::quantities`], if known.
+    pub fn exact_value(&self, quantity: &str) -> Option<f64> {
+        self.exact.iter().find(|(n, _)| n == quantity).map(|(_, v)| *v)
+    }
+
     /// A setting's value as a number.
     pub fn setting(&self, key: &str) -> Option<f64> {
         self.settings
@@ -606,6 +669,18 @@ impl RunResult {
             .find(|(k, _)| k == key)
             .and_then(|(_, v)| v.parse().ok())
     }
+}
+
+/// The numeric columns of a row that begin with `prefix`, without it.
+fn prefixed(f: &BTreeMap<String, String>, order: &[String], prefix: &str) -> Vec<(String, f64)> {
+    order
+        .iter()
+        .filter_map(|c| {
+            let k = c.strip_prefix(prefix)?;
+            let v = f.get(c)?.parse::<f64>().ok()?;
+            Some((k.to_string(), v))
+        })
+        .collect()
 }
 
 /// One CSV field, quoted when it must be.
@@ -668,6 +743,12 @@ pub fn to_csv(results: &[RunResult]) -> String {
             3
         } else if c.starts_with("probe:") {
             4
+        } else if c.starts_with("energy:") {
+            5
+        } else if c.starts_with("exact:") {
+            6
+        } else if c.starts_with("estimate:") {
+            7
         } else {
             2
         }

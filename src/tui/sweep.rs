@@ -64,6 +64,14 @@ impl SweepView {
         })
     }
 
+    /// Error estimates from the finest three refinements of h, one per
+    /// group and quantity ([`crate::sweep::estimate`]).
+    fn estimates(&self) -> Vec<crate::sweep::estimate::Estimate> {
+        let Some(h) = self.h_key() else { return Vec::new() };
+        let all = crate::sweep::estimate::estimates(&self.results, h);
+        crate::sweep::estimate::finest(&all).into_iter().cloned().collect()
+    }
+
     fn error_name(&self) -> String {
         self.results
             .iter()
@@ -94,8 +102,22 @@ pub fn draw(frame: &mut Frame, v: &SweepView) {
         title,
     );
     let [left, right] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
-    let [table, map] = Layout::vertical([Constraint::Min(5), Constraint::Length(stability_height(v))]).areas(left);
+    let estimates = v.estimates();
+    let est_height = if estimates.is_empty() {
+        0
+    } else {
+        (estimates.len() as u16 + 3).min(12)
+    };
+    let [table, est, map] = Layout::vertical([
+        Constraint::Min(5),
+        Constraint::Length(est_height),
+        Constraint::Length(stability_height(v)),
+    ])
+    .areas(left);
     draw_table(frame, v, table);
+    if !estimates.is_empty() {
+        draw_estimates(frame, &estimates, est);
+    }
     draw_stability(frame, v, map);
     let [top, bottom] = Layout::vertical([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(right);
     draw_time_chart(frame, v, top);
@@ -137,6 +159,51 @@ fn draw_table(frame: &mut Frame, v: &SweepView, area: Rect) {
                 .borders(Borders::ALL)
                 .title(" runs (green: completed) "),
         ),
+        area,
+    );
+}
+
+/// The estimates panel: per quantity the fine value, observed order,
+/// GCI and, where the exact value is known, estimated over true error.
+fn draw_estimates(frame: &mut Frame, est: &[crate::sweep::estimate::Estimate], area: Rect) {
+    use crate::sweep::estimate::Behaviour;
+    let header = Row::new(vec!["quantity", "value", "order", "GCI", "est/true"])
+        .style(Style::new().add_modifier(Modifier::BOLD));
+    let fmt = |v: f64, f: &dyn Fn(f64) -> String| if v.is_finite() { f(v) } else { "-".into() };
+    let rows = est.iter().map(|e| {
+        let color = match e.behaviour {
+            Behaviour::Monotone | Behaviour::Resolved => Color::Green,
+            Behaviour::NotAsymptotic | Behaviour::Oscillatory => Color::Yellow,
+            Behaviour::Diverging => Color::Red,
+        };
+        let name = e.quantity.strip_prefix("probe:").unwrap_or(&e.quantity);
+        let name = if e.group == "runs" {
+            name.to_string()
+        } else {
+            format!("{} {name}", e.group)
+        };
+        Row::new(vec![
+            Cell::from(name),
+            Cell::from(format!("{:.4e}", e.values[0])),
+            Cell::from(fmt(e.order, &|p| format!("{p:.2}"))).style(Style::new().fg(color)),
+            Cell::from(fmt(e.gci, &|g| format!("{g:.2e}"))),
+            Cell::from(fmt(e.effectivity(), &|r| format!("{r:.2}"))),
+        ])
+    });
+    let widths = [
+        Constraint::Percentage(36),
+        Constraint::Percentage(20),
+        Constraint::Percentage(10),
+        Constraint::Percentage(18),
+        Constraint::Percentage(16),
+    ];
+    let h = est.first().map_or(0.0, |e| e.h[0]);
+    frame.render_widget(
+        Table::new(rows, widths)
+            .header(header)
+            .block(Block::default().borders(Borders::ALL).title(format!(
+                " error estimates at h = {h} (GCI; order green: asymptotic, yellow: not, red: diverging) "
+            ))),
         area,
     );
 }
