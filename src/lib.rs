@@ -52,6 +52,7 @@ pub mod state;
 pub mod sweep;
 pub mod tui;
 pub mod units;
+pub mod verify;
 pub mod vtk;
 
 pub use model::Model;

@@ -67,6 +67,9 @@ enum Cmd {
     },
     /// Open a recording in the rerun viewer (or say how to install it).
     Replay { recording: PathBuf },
+    /// Run every paper benchmark against the papers' numbers: paper value,
+    /// ours, ratio, tolerance and pass per row; exit 1 when a row fails.
+    Verify(VerifyArgs),
     /// Step a scene interactively in the terminal.
     Tui {
         scene: Option<PathBuf>,
@@ -234,6 +237,7 @@ fn main() -> ExitCode {
         Some(Cmd::Sweep(args)) => sweep(args),
         Some(Cmd::SweepRun { scene, result, record }) => sweep_run(&scene, &result, record.as_deref()),
         Some(Cmd::Replay { recording }) => replay(&recording),
+        Some(Cmd::Verify(args)) => verify(&args),
         Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
         Some(Cmd::Tui {
             scene,
@@ -1131,6 +1135,64 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
     });
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
     Ok(ExitCode::SUCCESS)
+}
+
+/// Arguments of `mpmlab verify`.
+#[derive(clap::Args)]
+struct VerifyArgs {
+    /// Only the rows CI runs (about a minute); the full set takes longer.
+    #[arg(long)]
+    quick: bool,
+    /// Also write the rows as CSV
+    /// (`benchmark,quantity,paper,ours,ratio,tolerance,pass,why`).
+    #[arg(long, value_name = "FILE")]
+    csv: Option<PathBuf>,
+    /// Rewrite the generated table of this Markdown file (between its
+    /// `verify` markers; e.g. docs/verification.md) with the rows.
+    #[arg(long, value_name = "FILE")]
+    write_docs: Option<PathBuf>,
+    /// Folder of the shipped scenes.
+    #[arg(long, default_value = "scenarios")]
+    scenes: PathBuf,
+}
+
+/// `mpmlab verify`: the papers' numbers against ours. Exit 0 when every
+/// row passes, 1 when one fails, 130 when interrupted.
+fn verify(a: &VerifyArgs) -> Result<ExitCode> {
+    use mpmlab::verify;
+    if !a.scenes.is_dir() {
+        eprintln!("error: {}: no such folder of scenes", a.scenes.display());
+        return Ok(ExitCode::from(2));
+    }
+    if a.quick && a.write_docs.is_some() {
+        eprintln!("error: --write-docs needs the full set (without --quick)");
+        return Ok(ExitCode::from(2));
+    }
+    let stop = mpmlab::runner::stop_on_signals();
+    let verify::Verified { rows, tables } = verify::verify(&a.scenes, a.quick, &stop, &mut |line| eprintln!("{line}"));
+    if stop.load(std::sync::atomic::Ordering::Relaxed) {
+        eprintln!("interrupted");
+        return Ok(ExitCode::from(130));
+    }
+    out!("{}", verify::table(&rows));
+    if let Some(p) = &a.csv {
+        std::fs::write(p, verify::csv(&rows)).with_context(|| format!("cannot write {}", p.display()))?;
+        out!("csv: {}", p.display());
+    }
+    if let Some(p) = &a.write_docs {
+        let doc = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+        let mut doc = verify::replace_section(&doc, "rows", &verify::markdown(&rows));
+        for (name, table) in &tables {
+            doc = verify::replace_section(&doc, name, table);
+        }
+        std::fs::write(p, doc).with_context(|| format!("cannot write {}", p.display()))?;
+        out!("table written into {}", p.display());
+    }
+    Ok(if rows.iter().all(|r| r.pass) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }
 
 /// `mpmlab replay FILE`: the rerun viewer on a recording, if installed;

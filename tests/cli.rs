@@ -268,3 +268,50 @@ fn record_cadence_flags_and_the_size_report() {
     assert!(err.contains("unknown field `colour`"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn verify_passes_and_the_docs_hold_its_numbers() {
+    // `mpmlab verify` (the full set: about 30 s in release): every paper
+    // row within its tolerance, as CSV with the documented columns.
+    let csv = common::temp_path("verify", "csv");
+    let (code, out, err) = mpmlab(&["verify", "--csv", csv.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    let rows = mpmlab::sweep::parse_csv(&std::fs::read_to_string(&csv).unwrap());
+    let _ = std::fs::remove_file(&csv);
+    assert_eq!(
+        rows[0],
+        [
+            "benchmark",
+            "quantity",
+            "paper",
+            "ours",
+            "ratio",
+            "tolerance",
+            "pass",
+            "why"
+        ]
+    );
+    assert!(rows.len() > 35, "{out}");
+    assert!(rows[1..].iter().all(|r| r[6] == "true"), "{out}");
+    // docs/verification.md holds the table `verify --write-docs` wrote:
+    // each row there must show the number this binary computes, to the 4
+    // digits compared (values below 1e-12 are round-off and may differ
+    // between machines).
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/verification.md")).unwrap();
+    let begin = doc
+        .find("<!-- verify:rows:begin")
+        .expect("generated table in docs/verification.md");
+    let table = &doc[begin..doc.find("<!-- verify:rows:end -->").unwrap()];
+    for r in &rows[1..] {
+        let line = table
+            .lines()
+            .find(|l| l.starts_with(&format!("| {} | {} |", r[0], r[1])))
+            .unwrap_or_else(|| panic!("{} / {} not in docs/verification.md", r[0], r[1]));
+        let documented: f64 = line.split('|').nth(4).unwrap().trim().parse().unwrap();
+        let ours: f64 = r[3].parse().unwrap();
+        assert!(
+            (documented - ours).abs() <= 5e-4 * ours.abs() || ours.abs() < 1e-12,
+            "{line}: this binary gives {ours:e}"
+        );
+    }
+}
