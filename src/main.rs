@@ -945,6 +945,16 @@ struct SweepArgs {
     /// computed, without this flag, whenever h takes three values).
     #[arg(long)]
     estimate: bool,
+    /// Find the cheapest discretisation meeting an error target instead of
+    /// a cross product: `error:<name>=TOL` (against the exact solution) or
+    /// `probe:<name>:<key>=TOL` / `energy:<name>=TOL` (relative GCI of
+    /// three refinements). Refines h coarse to fine at the scene's points
+    /// per cell and twice them, predicting from the observed order.
+    #[arg(long, value_name = "QUANTITY=TOL", conflicts_with_all = ["vary", "preset", "emit_jobs", "record"])]
+    target: Option<String>,
+    /// Seconds of runs a --target search may spend.
+    #[arg(long, default_value_t = 300.0, requires = "target")]
+    budget: f64,
     /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     collect: Option<PathBuf>,
@@ -1072,6 +1082,9 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         ),
         (None, None) => anyhow::bail!("give a scene file, --preset NAME or --collect DIR"),
     };
+    if let Some(t) = &a.target {
+        return target_search(&name, &path, a.out.clone(), t, a.budget);
+    }
     for v in &a.vary {
         varies.push(Vary::parse(v).map_err(anyhow::Error::msg)?);
     }
@@ -1189,6 +1202,75 @@ fn verify(a: &VerifyArgs) -> Result<ExitCode> {
         out!("table written into {}", p.display());
     }
     Ok(if rows.iter().all(|r| r.pass) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// `mpmlab sweep SCENE --target Q=TOL`: the cheapest run meeting a target
+/// (exit 0 when one does, 1 when none did within the budget).
+fn target_search(name: &str, path: &Path, out: Option<PathBuf>, target: &str, budget: f64) -> Result<ExitCode> {
+    use mpmlab::scene::Placement;
+    use mpmlab::sweep::{driver, target, Folder};
+    let t = match target::Target::parse(target) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: --target {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    if !(budget > 0.0 && budget.is_finite()) {
+        eprintln!("error: --budget must be a positive number of seconds");
+        return Ok(ExitCode::from(2));
+    }
+    let base = match mpmlab::scene::read_scene_text(path) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    let scene = match mpmlab::scene::Scene::parse(&base, &path.display().to_string()) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    if let Err(code) = load(path, &Limits::default()) {
+        return Ok(code);
+    }
+    // Points per cell is a setting of the search only where every body
+    // places its points per cell.
+    let ppc = scene
+        .bodies
+        .iter()
+        .all(|b| b.lattice.is_none() && b.placement != Placement::Polar)
+        .then(|| scene.bodies.first().map(|b| b.points_per_cell))
+        .flatten();
+    let folder = Folder(out.unwrap_or_else(|| PathBuf::from("sweeps").join(format!("{name}-target"))));
+    let exe = std::env::current_exe().context("cannot find the mpmlab executable")?;
+    out!(
+        "searching {} for {} <= {:e} within {budget} s of runs, in {}",
+        path.display(),
+        t.quantity,
+        t.tol,
+        folder.0.display()
+    );
+    let found = target::search(
+        &folder,
+        &exe,
+        &base,
+        target::Start { h: scene.grid.h, ppc },
+        &t,
+        budget,
+        &|line| out!("{line}"),
+    )
+    .map_err(anyhow::Error::msg)?;
+    out!("{}", driver::finish(&folder, name).map_err(anyhow::Error::msg)?);
+    out!("{}", target::report(&found));
+    Ok(if found.best.is_some() {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(1)

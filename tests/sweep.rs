@@ -375,3 +375,46 @@ fn estimates_match_the_true_error_in_the_asymptotic_range() {
     assert!(err.contains("--estimate needs a refinement study"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_target_search_predicts_and_meets_the_error() {
+    // The confined column's G (31) error is exactly h/(4H) with 2x2 points
+    // (H = 10 m): 2.5e-2 at h = 1, 1.25e-2 at 0.5. For a target of 1e-2
+    // the observed order 1 predicts 6.25e-3 one halving on, at h = 0.25,
+    // which the run must measure to round-off.
+    let dir: PathBuf = temp_path("sweep-target", "d");
+    let (code, out, err) = mpmlab(&[
+        "sweep",
+        "scenarios/column-small-strain.toml",
+        "--target",
+        "error:syy_normalised=1e-2",
+        "--budget",
+        "60",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let report = out.split("\ntarget: ").last().unwrap();
+    let line = report
+        .lines()
+        .find(|l| l.contains("h=0.25_ppc=2 "))
+        .unwrap_or_else(|| panic!("{out}"));
+    let nums: Vec<f64> = line.split_whitespace().filter_map(|w| w.parse().ok()).collect();
+    // h, ppc, cost, predicted, measure
+    assert_eq!(nums.len(), 5, "{line}");
+    assert!(
+        (nums[3] - 6.25e-3).abs() < 1e-12 && (nums[4] - 6.25e-3).abs() < 1e-12,
+        "{line}"
+    );
+    assert!(out.contains("cheapest meeting the target:"), "{out}");
+    // Every run it made is a row of the folder's table.
+    let rows = table(&dir);
+    assert!(
+        rows.iter().any(|r| r.id == "h=0.25_ppc=2") && rows.len() >= 4,
+        "{rows:?}"
+    );
+    // A target that is not a quantity is refused before anything runs.
+    let (code, _, err) = mpmlab(&["sweep", "scenarios/column-small-strain.toml", "--target", "stress=1"]);
+    assert_eq!(code, 2, "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -22,6 +22,7 @@ pub mod driver;
 pub mod estimate;
 pub mod presets;
 pub mod svg;
+pub mod target;
 
 use crate::runner::{self, Observer, RunEnd};
 use crate::scene::Scene;
