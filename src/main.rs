@@ -268,7 +268,9 @@ fn limits(max_memory: Option<u64>) -> Limits {
 }
 
 /// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed,
-/// 130 interrupted (Ctrl-C or SIGTERM; the recording is closed cleanly).
+/// 130 interrupted (Ctrl-C or SIGTERM; the recording is closed cleanly; a
+/// second signal ends the process at once, and `mpmlab repair` closes the
+/// recording it leaves).
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {

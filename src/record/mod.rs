@@ -55,6 +55,10 @@
 //! the series. The recording is listed under its scene and run
 //! ([`recording_name`]).
 //!
+//! The file is flushed after a step once [`SYNC_PERIOD`] (or
+//! `--record-sync`) has passed, so a killed run leaves every step up to
+//! the last flush; [`repair`] writes the footer rerun adds at close.
+//!
 //! The engine knows nothing of this module: it reads reports and state.
 
 pub mod layout;
