@@ -1472,7 +1472,7 @@ fn a_lattice_of_nine_million_points_is_refused_by_its_memory_estimate() {
         assert_eq!(code, 2, "{err}");
         assert!(
             err.contains("field `body[0].lattice`")
-                && err.contains("estimated 36.9 GB")
+                && err.contains("estimated 9.2 GB")
                 && err.contains("9000000 points")
                 && err.contains("more than the 4.3 GB allowed")
                 && err.contains("coarser lattice"),
