@@ -95,6 +95,10 @@ pub struct Model {
     pub record: record::RecordSettings,
     /// Quantities followed through the run (`[[probe]]`).
     pub probes: Vec<crate::probe::Probe>,
+    /// The memory the process may use while stepping (bytes, the
+    /// `--max-memory` of the build): a factorisation whose estimate would
+    /// take the process beyond it is refused as a step failure.
+    pub max_memory: u64,
 }
 
 /// Largest grid the engine will build (cells).
@@ -350,6 +354,7 @@ impl Model {
             exact,
             record,
             probes,
+            max_memory: limits.max_memory,
         })
     }
 }
