@@ -90,8 +90,9 @@ enum Cmd {
         force: bool,
         #[command(flatten)]
         cadence: RecordArgs,
-        /// Refuse scenes whose estimated memory exceeds this (bytes, or
-        /// with k, M, G, T); default half of the available memory.
+        /// Refuse scenes whose estimated memory exceeds this, and steps
+        /// whose factor would take the process beyond it (bytes, or with
+        /// k, M, G, T); default half of the available memory.
         #[arg(long, value_name = "SIZE", value_parser = parse_size)]
         max_memory: Option<u64>,
         /// Start from a checkpoint of this scene (`run --checkpoint`, or `w`
@@ -144,8 +145,9 @@ struct RunArgs {
     /// Print only the summary.
     #[arg(long)]
     quiet: bool,
-    /// Refuse scenes whose estimated memory exceeds this (bytes, or
-    /// with k, M, G, T); default half of the available memory.
+    /// Refuse scenes whose estimated memory exceeds this, and steps whose
+    /// factor would take the process beyond it (bytes, or with k, M, G,
+    /// T); default half of the available memory.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     max_memory: Option<u64>,
 }

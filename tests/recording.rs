@@ -1143,3 +1143,34 @@ fn sigterm_during_a_long_step_stops_within_a_second_with_a_complete_recording() 
         let _ = std::fs::remove_file(p);
     }
 }
+
+#[test]
+fn a_step_beyond_the_memory_budget_is_an_error_event() {
+    // The step's factor is refused by its estimate (the budget, 1 MiB, is
+    // below what the process holds): the recording keeps the initial state
+    // and the failure, named as out of memory, at step 1.
+    let text = std::fs::read_to_string(common::scene_path("column-small-strain")).unwrap();
+    let scene = mpmlab::scene::Scene::parse(&text, "column-small-strain").unwrap();
+    let mut model = mpmlab::Model::build(&scene, &text, "column-small-strain").unwrap();
+    model.max_memory = 1 << 20;
+    let mut sim = mpmlab::Simulation::new(model);
+    let path = temp_path("rec-out-of-memory", "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    let failure = sim.step_guarded().unwrap_err();
+    assert!(
+        matches!(failure, mpmlab::StepFailure::OutOfMemory { step: 1, .. }),
+        "{failure:?}"
+    );
+    rec.log_failure(&failure, &sim).unwrap();
+    rec.finish().unwrap();
+    let events = common::events(&path);
+    let _ = std::fs::remove_file(&path);
+    assert!(
+        events.iter().any(
+            |e| e.starts_with("step 1 failed: out of memory: the Cholesky factor of")
+                && e.contains("needs an estimated")
+                && e.contains("grid.h")
+        ),
+        "{events:?}"
+    );
+}
