@@ -69,11 +69,13 @@ fn bench(c: &mut Criterion) {
     g.bench_function("pattern", |b| {
         b.iter(|| Pattern::new(&map.dofs, &blocks, Storage::Lower))
     });
-    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower).unwrap();
     let assemble = || {
-        pattern.assemble_with(&map.dofs, &blocks, |b, out| {
-            map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
-        })
+        pattern
+            .assemble_with(&map.dofs, &blocks, |b, out| {
+                map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
+            })
+            .unwrap()
     };
     g.bench_function("assemble stiffness", |b| b.iter(assemble));
     let (k, _) = assemble();
@@ -81,15 +83,17 @@ fn bench(c: &mut Criterion) {
         use mpmlab::solver::{Factorisation, Symbolic, Symmetry};
         let symbolic = Symbolic::new(&k, Symmetry::Symmetric).unwrap();
         g.bench_function("newton: cholesky (numeric, symbolic reused)", |b| {
-            b.iter(|| Factorisation::new(&symbolic, &k).unwrap())
+            b.iter(|| Factorisation::new(&symbolic, &k, u64::MAX).unwrap())
         });
-        let whole = Pattern::new(&map.dofs, &blocks, Storage::Full);
-        let (kf, _) = whole.assemble_with(&map.dofs, &blocks, |b, out| {
-            map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
-        });
+        let whole = Pattern::new(&map.dofs, &blocks, Storage::Full).unwrap();
+        let (kf, _) = whole
+            .assemble_with(&map.dofs, &blocks, |b, out| {
+                map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
+            })
+            .unwrap();
         let lu = Symbolic::new(&kf, Symmetry::General).unwrap();
         g.bench_function("newton: LU of the same matrix (numeric, symbolic reused)", |b| {
-            b.iter(|| Factorisation::new(&lu, &kf).unwrap())
+            b.iter(|| Factorisation::new(&lu, &kf, u64::MAX).unwrap())
         });
     }
     g.bench_function("cholesky (symbolic + numeric)", |b| {

@@ -10,6 +10,7 @@
 
 use crate::basis::{stencil, BasisKind, Stencil};
 use crate::grid::Grid;
+use crate::linalg::FactorError;
 use crate::model::{Body, GridDirichlet, GridTarget};
 use crate::points::Points;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -292,7 +293,10 @@ impl Pattern {
     /// free-free entries of every block (those on or below the diagonal
     /// for [`Storage::Lower`]). Memory: the node adjacency (4 bytes per node
     /// pair of a block) while it is built, then the pattern itself.
-    pub fn new(dofs: &DofMap, blocks: &[&[usize]], storage: Storage) -> Pattern {
+    ///
+    /// Its big buffers are reserved fallibly: memory that cannot be had is
+    /// an error (a step failure), not an abort.
+    pub fn new(dofs: &DofMap, blocks: &[&[usize]], storage: Storage) -> Result<Pattern, FactorError> {
         let n = dofs.n_free;
         let nodes = dofs.node_dof.len();
         let free = |nd: usize| dofs.node_dof[nd].iter().any(|d| matches!(d, Dof::Free(_)));
@@ -308,7 +312,7 @@ impl Pattern {
         for a in 0..nodes {
             start[a + 1] = start[a] + count[a] as usize;
         }
-        let mut adj = vec![0u32; start[nodes]];
+        let mut adj = try_filled(start[nodes], 0u32, "the node adjacency of the matrix pattern")?;
         let mut fill = start.clone();
         for b in blocks {
             for &a in b.iter().filter(|&&nd| free(nd)) {
@@ -328,9 +332,12 @@ impl Pattern {
                 }
             }
         }
-        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut col_ptr: Vec<usize> = Vec::new();
+        col_ptr
+            .try_reserve_exact(n + 1)
+            .map_err(|_| FactorError::allocation("the column pointers of the matrix pattern", 8 * (n + 1)))?;
         col_ptr.push(0usize);
-        let mut row_idx = Vec::new();
+        let mut row_idx: Vec<usize> = Vec::new();
         let mut rows = Vec::new();
         let mut neighbours: Vec<u32> = Vec::new();
         for (col, &nd) in col_of.iter().enumerate() {
@@ -349,12 +356,18 @@ impl Pattern {
                 }
             }
             rows.sort_unstable();
+            row_idx.try_reserve(rows.len()).map_err(|_| {
+                FactorError::allocation(
+                    "the row indices of the matrix pattern",
+                    8 * (row_idx.len() + rows.len()),
+                )
+            })?;
             row_idx.extend_from_slice(&rows);
             col_ptr.push(row_idx.len());
         }
         // faer checks the invariants: sorted, in-range rows.
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-        Pattern { n, symbolic, storage }
+        Ok(Pattern { n, symbolic, storage })
     }
 
     /// Stored entries.
@@ -365,15 +378,18 @@ impl Pattern {
     /// Assemble from dense blocks: `fill(b, out)` writes block `b`'s
     /// row-major `2m x 2m` matrix into `out` (resized by the caller's
     /// closure). Returns the reduced matrix and `K_fc du_c`, the coupling of
-    /// free rows to this step's prescribed increments.
+    /// free rows to this step's prescribed increments. The matrix's values
+    /// and its copy of the pattern are reserved fallibly.
     pub fn assemble_with(
         &self,
         dofs: &DofMap,
         blocks: &[&[usize]],
         mut fill: impl FnMut(usize, &mut Vec<f64>),
-    ) -> (SparseColMat<usize, f64>, Vec<f64>) {
-        let mut values = vec![0.0; self.nnz()];
-        let mut coupling = vec![0.0; self.n];
+    ) -> Result<(SparseColMat<usize, f64>, Vec<f64>), FactorError> {
+        let mut values = try_filled(self.nnz(), 0.0, "the values of the sparse matrix")?;
+        let mut coupling = try_filled(self.n, 0.0, "the coupling to prescribed values")?;
+        let col_ptr = try_copy(self.symbolic.col_ptr(), "the column pointers of the sparse matrix")?;
+        let row_idx = try_copy(self.symbolic.row_idx(), "the row indices of the sparse matrix")?;
         let (cp, ri) = (self.symbolic.col_ptr(), self.symbolic.row_idx());
         let mut kb = Vec::new();
         let mut bd = Vec::new();
@@ -410,6 +426,29 @@ impl Pattern {
                 }
             }
         }
-        (SparseColMat::new(self.symbolic.clone(), values), coupling)
+        let symbolic = SymbolicSparseColMat::new_checked(self.n, self.n, col_ptr, None, row_idx);
+        Ok((SparseColMat::new(symbolic, values), coupling))
     }
+}
+
+/// `n` copies of `value`, or the failure to allocate them for `what`.
+pub(crate) fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>, FactorError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| {
+        FactorError::allocation(
+            format!("{what} ({n} entries)"),
+            n.saturating_mul(std::mem::size_of::<T>()),
+        )
+    })?;
+    v.resize(n, value);
+    Ok(v)
+}
+
+/// A copy of `xs`, or the failure to allocate it for `what`.
+fn try_copy<T: Copy>(xs: &[T], what: &str) -> Result<Vec<T>, FactorError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(xs.len())
+        .map_err(|_| FactorError::allocation(format!("{what} ({} entries)", xs.len()), std::mem::size_of_val(xs)))?;
+    v.extend_from_slice(xs);
+    Ok(v)
 }

@@ -320,17 +320,17 @@ pub(crate) fn tangent(
     faces: &[GhostFace],
     it: &Iterate,
     gamma: f64,
-) -> SparseColMat<usize, f64> {
+) -> Result<SparseColMat<usize, f64>, crate::linalg::FactorError> {
     let ng = map.groups.len();
-    pattern
+    Ok(pattern
         .assemble_with(&map.dofs, blocks, |b, out| {
             if b < ng {
                 group_tangent(sim, map, it, None, b, out)
             } else {
                 faces[b - ng].stiffness(gamma, out)
             }
-        })
-        .0
+        })?
+        .0)
 }
 
 /// Assembly blocks: the point groups, then the ghost faces.

@@ -125,17 +125,17 @@ fn consistent_mass(
     faces: &[GhostFace],
     points: &PointsOnGrid,
     gamma_m: f64,
-) -> SparseColMat<usize, f64> {
+) -> Result<SparseColMat<usize, f64>, linalg::FactorError> {
     let ng = map.groups.len();
-    pattern
+    Ok(pattern
         .assemble_with(&map.dofs, blocks, |b, out| {
             if b < ng {
                 group_mass(map, b, points, out)
             } else {
                 faces[b - ng].stiffness(gamma_m, out)
             }
-        })
-        .0
+        })?
+        .0)
 }
 
 /// The lumped mass on the free dofs.
@@ -217,16 +217,19 @@ fn factorise_mass(
         && cache.key.iter().zip(&blocks).all(|(k, b)| k.as_slice() == *b);
     if !reused {
         let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
-        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower).map_err(|e| e.at_step(step))?;
         // The symbolic analysis needs values only for the structure.
         let points = PointsOnGrid {
             cached,
             ..PointsOnGrid::of(sim)
         };
-        let m = consistent_mass(map, &pattern, &blocks, faces, &points, 1.0);
-        let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| StepFailure::Singular {
-            step,
-            reason: format!("mass matrix: {e}"),
+        let m = consistent_mass(map, &pattern, &blocks, faces, &points, 1.0).map_err(|e| e.at_step(step))?;
+        let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| match e {
+            e @ linalg::FactorError::Memory { .. } => e.at_step(step),
+            e => StepFailure::Singular {
+                step,
+                reason: format!("mass matrix: {e}"),
+            },
         })?;
         sim.mass_cache = MassCache {
             key,
@@ -243,8 +246,10 @@ fn factorise_mass(
         cached,
         ..PointsOnGrid::of(sim)
     };
-    let m = consistent_mass(map, pattern, &blocks, faces, &points, gamma);
-    let factor = linalg::cholesky_with(symbolic, &m).map_err(|e| StepFailure::Singular {
+    let m = consistent_mass(map, pattern, &blocks, faces, &points, gamma).map_err(|e| e.at_step(step))?;
+    let factor = linalg::cholesky_with(symbolic, &m, sim.model.max_memory).map_err(|e| match e {
+        e @ linalg::FactorError::Memory { .. } => e.at_step(step),
+        e => StepFailure::Singular {
         step,
         reason: format!(
             "the {} mass matrix cannot be factorised: {}{}",
@@ -265,6 +270,7 @@ fn factorise_mass(
                 ""
             }
         ),
+    },
     })?;
     Ok((MassSolver::Consistent(factor, m), reused))
 }
@@ -513,7 +519,9 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
                 faces.clone()
             };
             conditioning_on(sim, map, &faces)
-        });
+        })
+        .transpose()
+        .map_err(|e| e.at_step(step))?;
     timings.condition = t.elapsed().as_secs_f64();
     let (condition, condition_unstabilised) = match &conditioning {
         None => (None, None),
@@ -725,14 +733,14 @@ fn cfl(h: f64, lambda_max: f64) -> Option<f64> {
 }
 
 /// Mass conditioning and CFL numbers for a mapping and its ghost faces.
-fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Conditioning {
+fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Result<Conditioning, linalg::FactorError> {
     let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
     let masses = &sim.state.points.mass;
     let blocks = blocks_of(map, faces);
-    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower)?;
     let points = PointsOnGrid::of(sim);
-    let mc = consistent_mass(map, &pattern, &blocks, faces, &points, 0.0);
-    let ms = consistent_mass(map, &pattern, &blocks, faces, &points, sim.params.gamma_m);
+    let mc = consistent_mass(map, &pattern, &blocks, faces, &points, 0.0)?;
+    let ms = consistent_mass(map, &pattern, &blocks, faces, &points, sim.params.gamma_m)?;
     let (cond_c, fact_c) = spd_condition(&mc, mode, limit);
     let (cond_s, fact_s) = spd_condition(&ms, mode, limit);
     let lumped = lumped_mass(map, masses);
@@ -747,11 +755,11 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
     };
     // Stiffness: the material tangent at the current state, with and
     // without the ghost term.
-    let full = Pattern::new(&map.dofs, &blocks, Storage::Full);
+    let full = Pattern::new(&map.dofs, &blocks, Storage::Full)?;
     let zero = vec![[0.0; 2]; map.dofs.node_dof.len()];
     let it = crate::bulk::evaluate(sim, map, &zero);
-    let k = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, 0.0);
-    let ks = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k);
+    let k = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, 0.0)?;
+    let ks = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k)?;
     let h = sim.model.grid.h;
     let with = |k: &SparseColMat<usize, f64>, m: &SparseColMat<usize, f64>, f: &Option<Factor>| match f {
         Some(f) => cfl(
@@ -760,7 +768,7 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
         ),
         None => Some(0.0),
     };
-    Conditioning {
+    Ok(Conditioning {
         mass_consistent: cond_c,
         mass_stabilised: cond_s,
         mass_lumped: cond_l,
@@ -780,26 +788,26 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Cond
         },
         stiffness: None,
         stiffness_stabilised: None,
-    }
+    })
 }
 
 /// Mass conditioning and CFL numbers at the current configuration, on
 /// demand (any analysis): the consistent, stabilised (`gamma_M` of the
 /// parameters) and lumped masses, over the dofs the scene's supports
 /// leave free.
-pub(crate) fn conditioning(sim: &Simulation) -> Conditioning {
+pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::FactorError> {
     let model = &sim.model;
     let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
     let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
-    let mut c = conditioning_on(sim, &map, &faces);
+    let mut c = conditioning_on(sim, &map, &faces)?;
     let blocks = blocks_of(&map, &faces);
-    let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+    let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower)?;
     let it = crate::bulk::evaluate(sim, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()]);
     let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
     let k = |gamma: f64| crate::bulk::tangent(sim, &map, &lower, &blocks, &faces, &it, gamma);
-    c.stiffness = Some(spd_condition(&k(0.0), mode, limit).0);
-    c.stiffness_stabilised = Some(spd_condition(&k(sim.params.gamma_k), mode, limit).0);
-    c
+    c.stiffness = Some(spd_condition(&k(0.0)?, mode, limit).0);
+    c.stiffness_stabilised = Some(spd_condition(&k(sim.params.gamma_k)?, mode, limit).0);
+    Ok(c)
 }
 
 /// Grid velocities from mapping the point momenta with the stabilised
@@ -818,7 +826,7 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
         MassSolver::Lumped(lumped_mass(&map, &pts.mass))
     } else {
         let blocks = blocks_of(&map, &faces);
-        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower);
+        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower).map_err(|e| e.to_string())?;
         let m = consistent_mass(
             &map,
             &pattern,
@@ -826,7 +834,8 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
             &faces,
             &PointsOnGrid::of(sim),
             sim.params.gamma_m,
-        );
+        )
+        .map_err(|e| e.to_string())?;
         MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
     };
     let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));

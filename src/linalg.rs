@@ -13,13 +13,42 @@
 //! stays accurate for graded matrices (tiny basis values). The method used is
 //! part of the answer.
 
+use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, Lu, SymbolicLlt, SymbolicLu};
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
+use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
 use faer::sparse::SparseColMat;
-use faer::{Mat, Side};
+use faer::{Conj, Mat, Par, Side};
+use std::sync::Arc;
 
-/// The Cholesky factor of the reduced stiffness.
-pub type Factor = Llt<usize, f64>;
+/// The symbolic Cholesky analysis of a pattern (ordering, elimination
+/// tree, supernodes), shared by every matrix of that pattern.
+pub type CholeskySymbolic = Arc<SymbolicCholesky<usize>>;
+
+/// The Cholesky factor of the reduced stiffness: the analysis and the
+/// values of `L`.
+#[derive(Clone, Debug)]
+pub struct Factor {
+    symbolic: CholeskySymbolic,
+    values: Vec<f64>,
+}
+
+impl Factor {
+    /// Overwrite `x` with `A^-1 x`.
+    pub fn solve_in_place(&self, x: &mut Mat<f64>) {
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(x.ncols(), par()));
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            x.as_mut(),
+            par(),
+            MemStack::new(&mut mem),
+        );
+    }
+}
+
+fn par() -> Par {
+    faer::get_global_parallelism()
+}
 
 /// Why a factorisation failed.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,6 +57,17 @@ pub enum FactorError {
     /// unknown is not held by stiffness or supports.
     NotPositiveDefinite {
         pivot: usize,
+    },
+    /// The factor does not fit: its estimate (from the symbolic analysis)
+    /// would take the process beyond `budget`, or (`budget` `None`) its
+    /// memory could not be allocated.
+    Memory {
+        /// What needs the memory (`the Cholesky factor of 12480 unknowns (3.1e6 entries)`).
+        what: String,
+        bytes: u64,
+        /// The process's resident memory before it (0 where unknown).
+        in_use: u64,
+        budget: Option<u64>,
     },
     Other(String),
 }
@@ -40,29 +80,192 @@ impl std::fmt::Display for FactorError {
                 "the stiffness matrix is not positive definite (pivot {pivot} of the permuted system): \
                  a rigid-body mode is unrestrained or a node is held by almost no material"
             ),
+            FactorError::Memory {
+                what,
+                bytes,
+                in_use,
+                budget: Some(budget),
+            } => write!(
+                f,
+                "{what} needs an estimated {}, which with the {} in use exceeds the {} allowed (--max-memory)",
+                crate::model::bytes(*bytes),
+                crate::model::bytes(*in_use),
+                crate::model::bytes(*budget)
+            ),
+            FactorError::Memory {
+                what,
+                bytes,
+                in_use,
+                budget: None,
+            } => write!(
+                f,
+                "{} could not be allocated ({} in use)",
+                sized(what, *bytes),
+                crate::model::bytes(*in_use)
+            ),
             FactorError::Other(s) => write!(f, "{s}"),
         }
     }
 }
 
+/// `12.3 MB for the factor`, or `memory for the factor` when the size is
+/// not known (0).
+pub fn sized(what: &str, bytes: u64) -> String {
+    if bytes == 0 {
+        format!("memory for {what}")
+    } else {
+        format!("{} for {what}", crate::model::bytes(bytes))
+    }
+}
+
+impl FactorError {
+    /// The step failure this makes at `step`: out of memory, or a singular
+    /// system.
+    pub fn at_step(self, step: usize) -> crate::StepFailure {
+        match self {
+            FactorError::Memory {
+                what,
+                bytes,
+                in_use,
+                budget,
+            } => crate::StepFailure::OutOfMemory {
+                step,
+                what,
+                bytes,
+                in_use,
+                budget,
+            },
+            e => crate::StepFailure::Singular {
+                step,
+                reason: e.to_string(),
+            },
+        }
+    }
+
+    /// Memory for `what` (`bytes`) could not be allocated.
+    pub fn allocation(what: impl Into<String>, bytes: usize) -> FactorError {
+        FactorError::Memory {
+            what: what.into(),
+            bytes: bytes as u64,
+            in_use: resident_bytes().unwrap_or(0),
+            budget: None,
+        }
+    }
+}
+
+/// The process's resident memory now (`VmRSS` of /proc/self/status).
+pub fn resident_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: u64 = text
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    kb.checked_mul(1024)
+}
+
+/// Refuse an allocation of `bytes` for `what` that would take the process's
+/// resident memory beyond `budget` (`u64::MAX`: no check).
+pub fn check_memory(what: impl FnOnce() -> String, bytes: u64, budget: u64) -> Result<(), FactorError> {
+    if budget == u64::MAX {
+        return Ok(());
+    }
+    let in_use = resident_bytes().unwrap_or(0);
+    if in_use.saturating_add(bytes) <= budget {
+        return Ok(());
+    }
+    Err(FactorError::Memory {
+        what: what(),
+        bytes,
+        in_use,
+        budget: Some(budget),
+    })
+}
+
+/// Bytes a numeric Cholesky or `L D L^T` with analysis `s` allocates: the
+/// values of `L` (counted by the symbolic analysis, fill-in included) and
+/// faer's workspace.
+pub fn cholesky_bytes(s: &SymbolicCholesky<usize>) -> u64 {
+    let scratch = s
+        .factorize_numeric_ldlt_scratch::<f64>(par(), Default::default())
+        .size_bytes()
+        .max(
+            s.factorize_numeric_llt_scratch::<f64>(par(), Default::default())
+                .size_bytes(),
+        );
+    (8 * s.len_val()).saturating_add(scratch) as u64
+}
+
+/// A factor's description for messages.
+pub fn factor_what(kind: &str, s: &SymbolicCholesky<usize>) -> String {
+    format!(
+        "the {kind} factor of {} unknowns ({:.2e} entries)",
+        s.nrows(),
+        s.len_val() as f64
+    )
+}
+
 /// Sparse Cholesky factorisation of a symmetric matrix given by its lower triangle.
 pub fn cholesky(a: &SparseColMat<usize, f64>) -> Result<Factor, FactorError> {
-    cholesky_with(&cholesky_symbolic(a)?, a)
+    cholesky_with(&cholesky_symbolic(a)?, a, u64::MAX)
+}
+
+/// [`cholesky`] refused beyond a memory budget ([`check_memory`]).
+pub fn cholesky_within(a: &SparseColMat<usize, f64>, budget: u64) -> Result<Factor, FactorError> {
+    cholesky_with(&cholesky_symbolic(a)?, a, budget)
 }
 
 /// Symbolic Cholesky analysis (ordering, elimination tree) of a pattern, to
 /// reuse for every matrix of that pattern.
-pub fn cholesky_symbolic(a: &SparseColMat<usize, f64>) -> Result<SymbolicLlt<usize>, FactorError> {
-    SymbolicLlt::try_new(a.symbolic(), Side::Lower).map_err(|e| FactorError::Other(format!("{e:?}")))
+pub fn cholesky_symbolic(a: &SparseColMat<usize, f64>) -> Result<CholeskySymbolic, FactorError> {
+    factorize_symbolic_cholesky(a.symbolic(), Side::Lower, Default::default(), Default::default())
+        .map(Arc::new)
+        .map_err(|e| match e {
+            faer::sparse::FaerError::OutOfMemory => {
+                FactorError::allocation(format!("the symbolic analysis of {} unknowns", a.nrows()), 0)
+            }
+            e => FactorError::Other(format!("{e:?}")),
+        })
 }
 
-/// Numeric Cholesky with a symbolic analysis of the same pattern.
-pub fn cholesky_with(symbolic: &SymbolicLlt<usize>, a: &SparseColMat<usize, f64>) -> Result<Factor, FactorError> {
-    Llt::try_new_with_symbolic(symbolic.clone(), a.as_ref(), Side::Lower).map_err(|e| match e {
-        faer::sparse::linalg::LltError::Numeric(faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot {
-            index,
-        }) => FactorError::NotPositiveDefinite { pivot: index },
-        other => FactorError::Other(format!("{other:?}")),
+/// Numeric Cholesky with a symbolic analysis of the same pattern, refused
+/// when its estimate ([`cholesky_bytes`]) exceeds `budget`
+/// ([`check_memory`]); an allocation that fails is an error too.
+pub fn cholesky_with(
+    symbolic: &CholeskySymbolic,
+    a: &SparseColMat<usize, f64>,
+    budget: u64,
+) -> Result<Factor, FactorError> {
+    let s = symbolic;
+    check_memory(|| factor_what("Cholesky", s), cholesky_bytes(s), budget)?;
+    let mut values = Vec::new();
+    values
+        .try_reserve_exact(s.len_val())
+        .map_err(|_| FactorError::allocation(factor_what("Cholesky", s), 8 * s.len_val()))?;
+    values.resize(s.len_val(), 0.0);
+    let req = s.factorize_numeric_llt_scratch::<f64>(par(), Default::default());
+    let mut mem =
+        MemBuffer::try_new(req).map_err(|_| FactorError::allocation("the Cholesky workspace", req.size_bytes()))?;
+    s.factorize_numeric_llt(
+        &mut values,
+        a.as_ref(),
+        Side::Lower,
+        Default::default(),
+        par(),
+        MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .map_err(|e| match e {
+        faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => {
+            FactorError::NotPositiveDefinite { pivot: index }
+        }
+    })?;
+    Ok(Factor {
+        symbolic: s.clone(),
+        values,
     })
 }
 

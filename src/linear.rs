@@ -45,10 +45,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     timings.assembly = t.elapsed().as_secs_f64();
     // 3. Factorise (sparse Cholesky).
     let t = Instant::now();
-    let factor = linalg::cholesky(&system.k).map_err(|e| StepFailure::Singular {
-        step,
-        reason: e.to_string(),
-    })?;
+    let factor = linalg::cholesky_within(&system.k, sim.model.max_memory).map_err(|e| e.at_step(step))?;
     timings.factorisation = t.elapsed().as_secs_f64();
     // 4. Solve and check the residual.
     let t = Instant::now();
@@ -195,7 +192,8 @@ impl<'a> Setup<'a> {
         };
         timings.mapping = start.elapsed().as_secs_f64();
         let t = Instant::now();
-        let pattern = Pattern::new(&map.dofs, &linear_blocks(&map, &band, &faces), Storage::Lower);
+        let pattern = Pattern::new(&map.dofs, &linear_blocks(&map, &band, &faces), Storage::Lower)
+            .map_err(|e| e.at_step(step))?;
         timings.pattern = t.elapsed().as_secs_f64();
         Ok(Setup {
             sim,
@@ -217,33 +215,35 @@ impl<'a> Setup<'a> {
 
     /// The reduced stiffness (lower triangle) and `K_fc du_c`, with or
     /// without the ghost term.
-    fn stiffness(&self, with_ghost: bool) -> (SparseColMat<usize, f64>, Vec<f64>) {
+    fn stiffness(&self, with_ghost: bool) -> Result<(SparseColMat<usize, f64>, Vec<f64>), StepFailure> {
         let (map, pts) = (&self.map, &self.sim.state.points);
         let d_of = |p: usize| self.sim.material_of(p).d_matrix();
         let (ng, nb) = (map.groups.len(), self.band.len());
         let gamma = self.sim.params.gamma_k;
-        self.pattern.assemble_with(&map.dofs, &self.blocks(), |b, out| {
-            if b < ng {
-                let g = &map.groups[b];
-                match &self.ibm {
-                    Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
-                        let m2 = 2 * g.nodes.len();
-                        out.clear();
-                        out.resize(m2 * m2, 0.0);
-                        for &p in &g.points {
-                            let (bb, _) = s.point_b(&map.stencils[p], pts.x[p]);
-                            ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
+        self.pattern
+            .assemble_with(&map.dofs, &self.blocks(), |b, out| {
+                if b < ng {
+                    let g = &map.groups[b];
+                    match &self.ibm {
+                        Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
+                            let m2 = 2 * g.nodes.len();
+                            out.clear();
+                            out.resize(m2 * m2, 0.0);
+                            for &p in &g.points {
+                                let (bb, _) = s.point_b(&map.stencils[p], pts.x[p]);
+                                ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
+                            }
                         }
+                        _ => map.group_stiffness(g, pts, &d_of, out),
                     }
-                    _ => map.group_stiffness(g, pts, &d_of, out),
+                } else if b < ng + nb {
+                    out.clear();
+                    out.extend_from_slice(&self.band[b - ng].1);
+                } else {
+                    self.faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
                 }
-            } else if b < ng + nb {
-                out.clear();
-                out.extend_from_slice(&self.band[b - ng].1);
-            } else {
-                self.faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
-            }
-        })
+            })
+            .map_err(|e| e.at_step(self.step))
     }
 }
 
@@ -261,7 +261,7 @@ struct System {
 /// `K` and the right-hand side `lambda1 f_ext - f_int - K_fc du_c - f_d`.
 fn assemble(setup: &Setup) -> Result<System, StepFailure> {
     let (sim, map, pts) = (setup.sim, &setup.map, &setup.sim.state.points);
-    let (k, coupling) = setup.stiffness(true);
+    let (k, coupling) = setup.stiffness(true)?;
     let (mut forces, boundaries) = sim.nodal_forces(map, setup.step, setup.lambda1)?;
     if let Some(s) = &setup.ibm {
         // Points inside a band work through B_bar: correct f_int.
@@ -383,9 +383,10 @@ fn conditioning(
     if setup.faces.is_empty() {
         return Ok((Some(c), None));
     }
-    let (k0, _) = setup.stiffness(false);
-    let c0 = match linalg::cholesky(&k0) {
+    let (k0, _) = setup.stiffness(false)?;
+    let c0 = match linalg::cholesky_within(&k0, setup.sim.model.max_memory) {
         Ok(f0) => linalg::condition_by(&k0, &f0, how, &keep_going).ok_or_else(cancelled)?,
+        Err(e @ linalg::FactorError::Memory { .. }) => return Err(e.at_step(setup.step)),
         Err(_) => Condition {
             value: f64::INFINITY,
             lambda_min: 0.0,

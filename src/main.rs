@@ -70,6 +70,15 @@ enum Cmd {
     /// Run every paper benchmark against the papers' numbers: paper value,
     /// ours, ratio, tolerance and pass per row; exit 1 when a row fails.
     Verify(VerifyArgs),
+    /// Make a recording cut short (a killed run) whole again: every
+    /// complete message of INPUT is written to OUTPUT with rerun's footer.
+    Repair {
+        input: PathBuf,
+        output: PathBuf,
+        /// Replace an existing OUTPUT whatever it holds.
+        #[arg(long)]
+        force: bool,
+    },
     /// Step a scene interactively in the terminal.
     Tui {
         scene: Option<PathBuf>,
@@ -84,8 +93,9 @@ enum Cmd {
         force: bool,
         #[command(flatten)]
         cadence: RecordArgs,
-        /// Refuse scenes whose estimated memory exceeds this (bytes, or
-        /// with k, M, G, T); default half of the available memory.
+        /// Refuse scenes whose estimated memory exceeds this, and steps
+        /// whose factor would take the process beyond it (bytes, or with
+        /// k, M, G, T); default half of the available memory.
         #[arg(long, value_name = "SIZE", value_parser = parse_size)]
         max_memory: Option<u64>,
         /// Start from a checkpoint of this scene (`run --checkpoint`, or `w`
@@ -138,8 +148,9 @@ struct RunArgs {
     /// Print only the summary.
     #[arg(long)]
     quiet: bool,
-    /// Refuse scenes whose estimated memory exceeds this (bytes, or
-    /// with k, M, G, T); default half of the available memory.
+    /// Refuse scenes whose estimated memory exceeds this, and steps whose
+    /// factor would take the process beyond it (bytes, or with k, M, G,
+    /// T); default half of the available memory.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     max_memory: Option<u64>,
 }
@@ -189,11 +200,46 @@ struct RecordArgs {
     /// plastic_strain, speed, error; `all` for every one; default sigma_yy).
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
     record_fields: Option<Vec<String>>,
+    /// Seconds of wall time between flushes of the recording into its file
+    /// (0: after every step; default 0.5). A killed run's file holds every
+    /// step up to the last flush; `mpmlab repair` makes it readable.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_seconds)]
+    record_sync: Option<std::time::Duration>,
+}
+
+/// A `--record-sync` value: finite, at least 0, at most a day.
+fn parse_seconds(s: &str) -> Result<std::time::Duration, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
+    if !(0.0..=86400.0).contains(&v) {
+        return Err(format!("{s} s is outside 0 ..= 86400"));
+    }
+    Ok(std::time::Duration::from_secs_f64(v))
 }
 
 impl RecordArgs {
     fn given(&self) -> bool {
-        self.record_every.is_some() || self.record_dt.is_some() || self.record_fields.is_some()
+        self.record_every.is_some()
+            || self.record_dt.is_some()
+            || self.record_fields.is_some()
+            || self.record_sync.is_some()
+    }
+
+    /// The recorder made with these.
+    fn create(
+        &self,
+        path: &Path,
+        text: &str,
+        sim: &Simulation,
+        settings: mpmlab::model::record::RecordSettings,
+    ) -> Result<Recorder, mpmlab::record::RecordError> {
+        let mut r = Recorder::create_with(path, text, sim, false, settings)?;
+        if let Some(p) = self.record_sync {
+            r.set_sync_period(p);
+        }
+        Ok(r)
     }
 
     /// The scene's settings with these over them.
@@ -227,7 +273,9 @@ fn limits(max_memory: Option<u64>) -> Limits {
 }
 
 /// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed,
-/// 130 interrupted (Ctrl-C or SIGTERM; the recording is closed cleanly).
+/// 130 interrupted (Ctrl-C or SIGTERM; the recording is closed cleanly; a
+/// second signal ends the process at once, and `mpmlab repair` closes the
+/// recording it leaves).
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -238,6 +286,7 @@ fn main() -> ExitCode {
         Some(Cmd::SweepRun { scene, result, record }) => sweep_run(&scene, &result, record.as_deref()),
         Some(Cmd::Replay { recording }) => replay(&recording),
         Some(Cmd::Verify(args)) => verify(&args),
+        Some(Cmd::Repair { input, output, force }) => Ok(repair(&input, &output, force)),
         Some(Cmd::Tui { sweep: Some(dir), .. }) => sweep_view(&dir),
         Some(Cmd::Tui {
             scene,
@@ -293,9 +342,12 @@ fn load(path: &Path, limits: &Limits) -> Result<(Simulation, String), ExitCode> 
 /// (its first bytes `RRF0`..`RRF2`) unless `force`. Refusals are bad
 /// arguments (exit 2); nothing has been written.
 fn check_record_target(record: &Path, scene: Option<&Path>, force: bool) -> Result<(), String> {
-    check_output_target("--record", record, scene, force, "a rerun recording", "run.rrd", |m| {
-        [b"RRF0", b"RRF1", b"RRF2"].iter().any(|x| m.starts_with(&x[..]))
-    })
+    check_output_target("--record", record, scene, force, "a rerun recording", "run.rrd", is_rrd)
+}
+
+/// Whether a file's first bytes are those of a rerun recording.
+fn is_rrd(magic: &[u8]) -> bool {
+    [b"RRF0", b"RRF1", b"RRF2"].iter().any(|x| magic.starts_with(&x[..]))
 }
 
 /// Whether the output file `path` of option `flag` may be written: not
@@ -620,7 +672,7 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     let vtk = &args.vtk;
     if record.is_none() && cadence.given() {
-        eprintln!("error: --record-every, --record-dt and --record-fields need --record FILE");
+        eprintln!("error: --record-every, --record-dt, --record-fields and --record-sync need --record FILE");
         return Ok(ExitCode::from(2));
     }
     if let Some(r) = record {
@@ -674,7 +726,7 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         }
     };
     let mut recorder = match record {
-        Some(p) => match Recorder::create_with(p, &text, &sim, false, settings) {
+        Some(p) => match cadence.create(p, &text, &sim, settings) {
             Ok(r) => {
                 if let Some(f) = &args.resume {
                     let _ = r.event(
@@ -733,7 +785,9 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     let mut detached = Vec::new();
     let end = mpmlab::runner::run(
         &mut sim,
-        &mut [&mut table, &mut recorder, &mut csv, &mut checkpoints, &mut vtk],
+        // The recorder first: a printed step line means the step is in the
+        // file (`Recorder::sync`), whatever happens to the process next.
+        &mut [&mut recorder, &mut table, &mut csv, &mut checkpoints, &mut vtk],
         &stop,
         &mut detached,
     );
@@ -1279,6 +1333,50 @@ fn target_search(name: &str, path: &Path, out: Option<PathBuf>, target: &str, bu
 
 /// `mpmlab replay FILE`: the rerun viewer on a recording, if installed;
 /// otherwise the exact command that installs the matching viewer (exit 1).
+/// `mpmlab repair IN OUT`: 0 repaired (or copied, when IN was complete),
+/// 2 bad arguments or an IN that is not a recording or holds nothing
+/// whole, 3 OUT cannot be written.
+fn repair(input: &Path, output: &Path, force: bool) -> ExitCode {
+    use mpmlab::record::repair::RepairError;
+    let same = matches!(
+        (std::fs::canonicalize(input), std::fs::canonicalize(output)),
+        (Ok(a), Ok(b)) if a == b
+    );
+    if same {
+        eprintln!(
+            "error: the output {} is the input itself; give another path (the input is left as it is)",
+            output.display()
+        );
+        return ExitCode::from(2);
+    }
+    if let Err(e) = check_output_target(
+        "output",
+        output,
+        None,
+        force,
+        "a rerun recording",
+        "repaired.rrd",
+        is_rrd,
+    ) {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
+    match mpmlab::record::repair::repair(input, output) {
+        Ok(r) => {
+            out!("repaired {} into {}: {r}", input.display(), output.display());
+            ExitCode::SUCCESS
+        }
+        Err(e @ RepairError::Write { .. }) => {
+            eprintln!("error: {e}");
+            ExitCode::from(3)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
 fn replay(file: &Path) -> Result<ExitCode> {
     use mpmlab::record::RERUN_VERSION;
     if !file.is_file() {
@@ -1456,7 +1554,7 @@ fn tui(
                 return Ok(ExitCode::from(2));
             }
         };
-        match Recorder::create_with(&path, &text, &sim, false, settings) {
+        match cadence.create(&path, &text, &sim, settings) {
             Ok(r) => {
                 if let Some(f) = resume {
                     let _ = r.event(

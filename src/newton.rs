@@ -89,8 +89,8 @@ fn infinite_condition() -> Condition {
 
 /// The condition estimate of a tangent not factorised yet (the one without
 /// the ghost term).
-fn condition_of(k: &SparseColMat<usize, f64>, symmetry: Symmetry) -> Condition {
-    match Symbolic::new(k, symmetry).and_then(|s| Factorisation::new(&s, k)) {
+fn condition_of(k: &SparseColMat<usize, f64>, symmetry: Symmetry, budget: u64) -> Condition {
+    match Symbolic::new(k, symmetry).and_then(|s| Factorisation::new(&s, k, budget)) {
         Ok(mut f) => condition_with(k, symmetry, &mut f),
         Err(_) => infinite_condition(),
     }
@@ -296,7 +296,8 @@ impl<'a> Setup<'a> {
             Symmetry::General => Storage::Full,
         };
         let t = Instant::now();
-        let pattern = Pattern::new(&map.dofs, &newton_blocks(&map, &faces, &band, &loads), storage);
+        let pattern = Pattern::new(&map.dofs, &newton_blocks(&map, &faces, &band, &loads), storage)
+            .map_err(|e| e.at_step(step))?;
         let pattern_time = t.elapsed().as_secs_f64();
         timings.mapping += mapping;
         timings.pattern += pattern_time;
@@ -482,7 +483,7 @@ impl<'a> Setup<'a> {
         let blocks = self.blocks();
         let mut failure = None;
         let ops = self.band.as_ref().map(|b| b.ops.as_slice());
-        let (k, _) = self.pattern.assemble_with(&self.map.dofs, &blocks, |b, out| {
+        let assembled = self.pattern.assemble_with(&self.map.dofs, &blocks, |b, out| {
             if b < ng {
                 group_tangent(self.sim, &self.map, &res.it, ops, b, out)
             } else if b < ng + nf {
@@ -494,9 +495,10 @@ impl<'a> Setup<'a> {
                 failure = Some(e);
             }
         });
-        match failure {
-            Some(e) => Err(e),
-            None => Ok(k),
+        match (failure, assembled) {
+            (Some(e), _) => Err(e),
+            (None, Err(e)) => Err(e.at_step(self.step)),
+            (None, Ok((k, _))) => Ok(k),
         }
     }
 }
@@ -754,14 +756,17 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
         let k = setup.tangent(&res, &d, setup.gamma)?;
         timings.assembly += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let singular = |e: linalg::FactorError| StepFailure::Singular {
-            step,
-            reason: e.to_string(),
-        };
+        let singular = |e: linalg::FactorError| e.at_step(step);
         if symbolic.is_none() {
             symbolic = Some(Symbolic::new(&k, setup.symmetry).map_err(singular)?);
         }
-        let mut factor = Factorisation::new(symbolic.as_ref().expect("set above"), &k).map_err(singular)?;
+        let Some(analysis) = symbolic.as_ref() else {
+            return Err(StepFailure::Internal {
+                step,
+                message: "no symbolic analysis".into(),
+            });
+        };
+        let mut factor = Factorisation::new(analysis, &k, setup.sim.model.max_memory).map_err(singular)?;
         timings.factorisation += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let dd = factor.solve(&res.r).map_err(singular)?;
@@ -810,7 +815,11 @@ fn conditioning(setup: &Setup, solved: &mut Solved) -> Result<(Option<Condition>
     }
     let with = match &mut solved.last {
         Some((k, f)) => condition_with(k, setup.symmetry, f),
-        None => condition_of(&setup.tangent(&solved.res, &solved.d, setup.gamma)?, setup.symmetry),
+        None => condition_of(
+            &setup.tangent(&solved.res, &solved.d, setup.gamma)?,
+            setup.symmetry,
+            setup.sim.model.max_memory,
+        ),
     };
     let without = if setup.faces.is_empty() {
         None
@@ -818,6 +827,7 @@ fn conditioning(setup: &Setup, solved: &mut Solved) -> Result<(Option<Condition>
         Some(condition_of(
             &setup.tangent(&solved.res, &solved.d, 0.0)?,
             setup.symmetry,
+            setup.sim.model.max_memory,
         ))
     };
     Ok((Some(with), without))

@@ -192,6 +192,18 @@ pub enum StepFailure {
     /// The observer cancelled the step ([`crate::Simulation::set_progress`]); the
     /// state is the last good step.
     Cancelled { step: usize, residuals: Vec<f64> },
+    /// A factor (or another large buffer) of the step would not fit: its
+    /// estimate from the symbolic analysis, added to the process's resident
+    /// memory `in_use`, exceeds `budget` (`--max-memory`), or (`budget`
+    /// `None`) allocating it failed. Nothing was computed with it.
+    OutOfMemory {
+        step: usize,
+        /// What needed the memory (`the Cholesky factor of 12480 unknowns (3.10e6 entries)`).
+        what: String,
+        bytes: u64,
+        in_use: u64,
+        budget: Option<u64>,
+    },
 }
 
 /// Progress inside a step, for observers: each Newton iteration's (or the
@@ -218,6 +230,7 @@ impl StepFailure {
             | StepFailure::LeftGrid { step, .. }
             | StepFailure::Diverged { step, .. }
             | StepFailure::Internal { step, .. }
+            | StepFailure::OutOfMemory { step, .. }
             | StepFailure::Cancelled { step, .. } => *step,
         }
     }
@@ -272,6 +285,30 @@ impl fmt::Display for StepFailure {
             ),
             StepFailure::Boundary { step, name, reason } => {
                 write!(f, "step {step} failed: boundary `{name}`: {reason}")
+            }
+            StepFailure::OutOfMemory {
+                step,
+                what,
+                bytes,
+                in_use,
+                budget,
+            } => {
+                let b = crate::model::bytes;
+                match budget {
+                    Some(budget) => write!(
+                        f,
+                        "step {step} failed: out of memory: {what} needs an estimated {}, which with the {} in use exceeds the {} allowed (--max-memory); use a larger grid.h (fewer unknowns) or a larger --max-memory",
+                        b(*bytes),
+                        b(*in_use),
+                        b(*budget)
+                    ),
+                    None => write!(
+                        f,
+                        "step {step} failed: out of memory: {} could not be allocated ({} in use); use a larger grid.h (fewer unknowns)",
+                        crate::linalg::sized(what, *bytes),
+                        b(*in_use)
+                    ),
+                }
             }
             StepFailure::NonFinite { step, what, residuals } if residuals.is_empty() => {
                 write!(f, "step {step} failed: non-finite {what}")

@@ -64,8 +64,9 @@ impl Simulation {
     /// Mass conditioning and CFL numbers at the current configuration, on
     /// demand (any analysis): the consistent, stabilised (`gamma_M` of the
     /// parameters) and lumped masses, over the dofs the scene's supports
-    /// leave free.
-    pub fn conditioning(&self) -> crate::report::Conditioning {
+    /// leave free. Memory that cannot be allocated for its matrices is an
+    /// error.
+    pub fn conditioning(&self) -> Result<crate::report::Conditioning, crate::linalg::FactorError> {
         crate::dynamics::conditioning(self)
     }
 

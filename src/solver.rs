@@ -22,11 +22,9 @@
 
 use crate::linalg::{self, FactorError};
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, LdltRef, LltRef, SymbolicCholesky, SymbolicCholeskyRaw,
-};
+use faer::sparse::linalg::cholesky::{LdltRef, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::linalg::solvers::SymbolicLu;
-use faer::sparse::SparseColMat;
+use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Mat, Par, Side};
 use std::sync::Arc;
 
@@ -64,7 +62,16 @@ pub enum Symmetry {
 #[derive(Clone)]
 pub enum Symbolic {
     Cholesky(Arc<SymbolicCholesky<usize>>),
-    Lu(SymbolicLu<usize>),
+    /// The LU analysis and an estimate of its factor (partial pivoting
+    /// decides the fill only numerically).
+    Lu(SymbolicLu<usize>, Estimate),
+}
+
+/// What a factor will take, known before it is computed.
+#[derive(Clone, Debug)]
+pub struct Estimate {
+    pub what: String,
+    pub bytes: u64,
 }
 
 impl Symbolic {
@@ -72,14 +79,57 @@ impl Symbolic {
     /// [`Symmetry::Symmetric`]).
     pub fn new(a: &SparseColMat<usize, f64>, symmetry: Symmetry) -> Result<Symbolic, FactorError> {
         match symmetry {
-            Symmetry::Symmetric => {
-                factorize_symbolic_cholesky(a.symbolic(), Side::Lower, Default::default(), Default::default())
-                    .map(|s| Symbolic::Cholesky(Arc::new(s)))
-                    .map_err(|e| FactorError::Other(format!("{e:?}")))
+            Symmetry::Symmetric => linalg::cholesky_symbolic(a).map(Symbolic::Cholesky),
+            Symmetry::General => {
+                let lu = linalg::lu_symbolic(a)?;
+                let chol = linalg::cholesky_symbolic(&lower_of_sum(a)?)?;
+                Ok(Symbolic::Lu(lu, lu_estimate(&chol, a.compute_nnz())))
             }
-            Symmetry::General => linalg::lu_symbolic(a).map(Symbolic::Lu),
         }
     }
+
+    /// What the numeric factor will take.
+    pub fn estimate(&self) -> Estimate {
+        match self {
+            Symbolic::Cholesky(s) => Estimate {
+                what: linalg::factor_what("Cholesky", s),
+                bytes: linalg::cholesky_bytes(s),
+            },
+            Symbolic::Lu(_, e) => e.clone(),
+        }
+    }
+}
+
+/// The LU factor of a matrix whose `A + A^T` has the Cholesky analysis
+/// `chol`: without pivoting, `L` and `U` have the pattern of the Cholesky
+/// factor's `L` and its transpose (values and row indices, 16 bytes an
+/// entry), and faer copies the matrix (`nnz` entries). Row pivoting adds
+/// fill this does not count; the tangents here are diagonally dominant
+/// enough that it stays small.
+fn lu_estimate(chol: &SymbolicCholesky<usize>, nnz: usize) -> Estimate {
+    let entries = 2 * chol.len_val();
+    Estimate {
+        what: format!(
+            "the LU factor of {} unknowns (about {:.2e} entries)",
+            chol.nrows(),
+            entries as f64
+        ),
+        bytes: (16 * entries + 16 * nnz) as u64,
+    }
+}
+
+/// The lower triangle of the pattern of `A + A^T` (values 1).
+fn lower_of_sum(a: &SparseColMat<usize, f64>) -> Result<SparseColMat<usize, f64>, FactorError> {
+    let (cp, ri) = (a.col_ptr(), a.row_idx());
+    let mut t = Vec::new();
+    t.try_reserve_exact(ri.len())
+        .map_err(|_| FactorError::allocation("the pattern of A + A^T", 24 * ri.len()))?;
+    for c in 0..a.ncols() {
+        for &r in &ri[cp[c]..cp[c + 1]] {
+            t.push(Triplet::new(r.max(c), r.min(c), 1.0));
+        }
+    }
+    SparseColMat::try_new_from_triplets(a.nrows(), a.ncols(), &t).map_err(|e| FactorError::Other(format!("{e:?}")))
 }
 
 /// A factorised reduced tangent.
@@ -87,6 +137,8 @@ pub struct Factorisation {
     kind: Factor,
     /// Negative pivots of `L D L^T` (0 for Cholesky; `None` for LU).
     negative_pivots: Option<usize>,
+    /// The memory budget of a fallback to LU during a solve.
+    budget: u64,
 }
 
 enum Factor {
@@ -101,30 +153,47 @@ fn par() -> Par {
     faer::get_global_parallelism()
 }
 
-fn oom() -> FactorError {
-    FactorError::Other("out of memory for the factor".into())
+/// LU of the symmetric `a` (lower triangle) made whole, within `budget`;
+/// `s` is the Cholesky analysis of its pattern.
+fn whole_lu(s: &SymbolicCholesky<usize>, a: &SparseColMat<usize, f64>, budget: u64) -> Result<Factor, FactorError> {
+    let e = lu_estimate(s, 2 * a.compute_nnz());
+    linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
+    let whole = symmetrised(a)?;
+    Ok(Factor::Lu(linalg::lu(&linalg::lu_symbolic(&whole)?, &whole)?))
 }
 
 impl Factorisation {
     /// Factorise `a` with the analysis of its pattern: Cholesky, then
     /// `L D L^T` at a non-positive pivot, then LU (of the matrix made whole)
     /// when `L D L^T` meets an exactly zero pivot; LU for general matrices.
-    pub fn new(symbolic: &Symbolic, a: &SparseColMat<usize, f64>) -> Result<Factorisation, FactorError> {
+    /// A factor whose estimate ([`Symbolic::estimate`]) would take the
+    /// process beyond `budget` bytes is refused before it is computed
+    /// ([`linalg::check_memory`]), and one whose memory cannot be allocated
+    /// is an error, not an abort.
+    pub fn new(symbolic: &Symbolic, a: &SparseColMat<usize, f64>, budget: u64) -> Result<Factorisation, FactorError> {
+        let e = symbolic.estimate();
+        linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
         let s = match symbolic {
-            Symbolic::Lu(s) => {
+            Symbolic::Lu(s, _) => {
                 return Ok(Factorisation {
                     kind: Factor::Lu(linalg::lu(s, a)?),
                     negative_pivots: None,
+                    budget,
                 })
             }
             Symbolic::Cholesky(s) => s,
         };
         let mut values = Vec::new();
-        values.try_reserve_exact(s.len_val()).map_err(|_| oom())?;
+        values
+            .try_reserve_exact(s.len_val())
+            .map_err(|_| FactorError::allocation(e.what.clone(), 8 * s.len_val()))?;
         values.resize(s.len_val(), 0.0);
+        let workspace = |req: faer::dyn_stack::StackReq| {
+            MemBuffer::try_new(req)
+                .map_err(|_| FactorError::allocation("the factorisation's workspace", req.size_bytes()))
+        };
         let llt = {
-            let mut mem = MemBuffer::try_new(s.factorize_numeric_llt_scratch::<f64>(par(), Default::default()))
-                .map_err(|_| oom())?;
+            let mut mem = workspace(s.factorize_numeric_llt_scratch::<f64>(par(), Default::default()))?;
             s.factorize_numeric_llt(
                 &mut values,
                 a.as_ref(),
@@ -140,11 +209,11 @@ impl Factorisation {
             return Ok(Factorisation {
                 kind: Factor::Cholesky(s.clone(), values),
                 negative_pivots: Some(0),
+                budget,
             });
         }
         let ldlt = {
-            let mut mem = MemBuffer::try_new(s.factorize_numeric_ldlt_scratch::<f64>(par(), Default::default()))
-                .map_err(|_| oom())?;
+            let mut mem = workspace(s.factorize_numeric_ldlt_scratch::<f64>(par(), Default::default()))?;
             s.factorize_numeric_ldlt(
                 &mut values,
                 a.as_ref(),
@@ -161,14 +230,14 @@ impl Factorisation {
             return Ok(Factorisation {
                 negative_pivots: Some(d.iter().filter(|&&x| x < 0.0).count()),
                 kind: Factor::Ldlt(s.clone(), values, a.clone()),
+                budget,
             });
         }
         drop(values);
-        let whole = symmetrised(a)?;
-        let lu = linalg::lu(&linalg::lu_symbolic(&whole)?, &whole)?;
         Ok(Factorisation {
-            kind: Factor::Lu(lu),
+            kind: whole_lu(s, a, budget)?,
             negative_pivots: None,
+            budget,
         })
     }
 
@@ -191,13 +260,13 @@ impl Factorisation {
     /// kind then says so for the rest of its life).
     pub fn solve(&mut self, b: &[f64]) -> Result<Vec<f64>, FactorError> {
         let x = self.solve_once(b);
-        if let Factor::Ldlt(_, _, a) = &self.kind {
+        if let Factor::Ldlt(s, _, a) = &self.kind {
             let r = linalg::sym_lower_mul(a, &x);
             let num: f64 = r.iter().zip(b).map(|(r, b)| (r - b) * (r - b)).sum::<f64>().sqrt();
             let den: f64 = b.iter().map(|b| b * b).sum::<f64>().sqrt();
             if !(num <= 1e-8 * den.max(f64::MIN_POSITIVE)) {
-                let whole = symmetrised(a)?;
-                self.kind = Factor::Lu(linalg::lu(&linalg::lu_symbolic(&whole)?, &whole)?);
+                let lu = whole_lu(s, a, self.budget)?;
+                self.kind = lu;
                 return Ok(self.solve_once(b));
             }
         }
@@ -256,7 +325,9 @@ fn pivots(s: &SymbolicCholesky<usize>, values: &[f64]) -> Vec<f64> {
 /// The whole matrix of a symmetric one given by its lower triangle.
 fn symmetrised(a: &SparseColMat<usize, f64>) -> Result<SparseColMat<usize, f64>, FactorError> {
     let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
-    let mut t = Vec::with_capacity(2 * v.len());
+    let mut t = Vec::new();
+    t.try_reserve_exact(2 * v.len())
+        .map_err(|_| FactorError::allocation("the whole matrix for LU", 48 * v.len()))?;
     for c in 0..a.ncols() {
         for k in cp[c]..cp[c + 1] {
             t.push(faer::sparse::Triplet::new(ri[k], c, v[k]));

@@ -445,8 +445,5 @@ pub(crate) fn check_points(
 #[derive(Default)]
 pub(crate) struct MassCache {
     pub(crate) key: Vec<Vec<usize>>,
-    pub(crate) pattern: Option<(
-        crate::assembly::Pattern,
-        faer::sparse::linalg::solvers::SymbolicLlt<usize>,
-    )>,
+    pub(crate) pattern: Option<(crate::assembly::Pattern, crate::linalg::CholeskySymbolic)>,
 }

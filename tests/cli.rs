@@ -266,6 +266,18 @@ fn record_cadence_flags_and_the_size_report() {
     let (code, _, err) = mpmlab(&["run", s, "--record", r, "--record-fields", "colour"]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("unknown field `colour`"), "{err}");
+    // The flush period: seconds from 0 to a day, with --record only.
+    let (code, _, err) = mpmlab(&["run", s, "--record-sync", "0"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("need --record"), "{err}");
+    for bad in ["-1", "nan", "1e9", "soon"] {
+        let arg = format!("--record-sync={bad}");
+        let (code, _, err) = mpmlab(&["run", s, "--record", r, &arg]);
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(err.contains("--record-sync"), "{bad}: {err}");
+    }
+    let (code, _, err) = mpmlab(&["run", s, "--quiet", "--record", r, "--record-sync", "0"]);
+    assert_eq!(code, 0, "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -175,7 +175,7 @@ fn translating_domain_mass_conditioning() {
                     max: [2.0 + a, 1.0],
                 };
             });
-            let c = sim.conditioning();
+            let c = sim.conditioning().unwrap();
             let v = [c.mass_consistent.value, c.mass_stabilised.value, c.mass_lumped.value];
             for i in 0..3 {
                 worst[i] = worst[i].max(v[i]);

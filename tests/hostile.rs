@@ -1472,7 +1472,7 @@ fn a_lattice_of_nine_million_points_is_refused_by_its_memory_estimate() {
         assert_eq!(code, 2, "{err}");
         assert!(
             err.contains("field `body[0].lattice`")
-                && err.contains("estimated 36.9 GB")
+                && err.contains("estimated 9.2 GB")
                 && err.contains("9000000 points")
                 && err.contains("more than the 4.3 GB allowed")
                 && err.contains("coarser lattice"),
@@ -1731,6 +1731,133 @@ fn every_preset_plans_valid_runs() {
             }
         }
     }
+}
+
+/// A shipped scene built with the default limits, then given a step-time
+/// budget of `budget` bytes.
+fn sim_with_budget(name: &str, budget: u64) -> mpmlab::Simulation {
+    let text = std::fs::read_to_string(scene_path(name)).unwrap();
+    let scene = Scene::parse(&text, name).unwrap();
+    let mut model = Model::build(&scene, &text, name).unwrap();
+    model.max_memory = budget;
+    mpmlab::Simulation::new(model)
+}
+
+#[test]
+fn a_factor_beyond_the_memory_budget_is_a_reported_step_failure() {
+    // Each factorisation is estimated from its symbolic analysis before it
+    // is computed; 1 MiB is less than the process already holds, so every
+    // factor is refused, whatever its size, and the state stays at step 0.
+    for (scene, what) in [
+        ("column-small-strain", "the Cholesky factor of"),
+        ("elastic-beam-ghost", "the Cholesky factor of"),
+        ("cantilever-follower-pressure-finite", "the LU factor of"),
+        ("ghost-collision-elastic", "the Cholesky factor of"),
+    ] {
+        let mut sim = sim_with_budget(scene, 1 << 20);
+        let f = sim.step_guarded().unwrap_err();
+        let mpmlab::StepFailure::OutOfMemory {
+            step: 1,
+            what: w,
+            bytes,
+            in_use,
+            budget: Some(budget),
+        } = &f
+        else {
+            panic!("{scene}: {f:?}");
+        };
+        assert!(w.starts_with(what) && w.contains("unknowns"), "{scene}: {w}");
+        assert!(
+            *bytes > 0 && *in_use + *bytes > *budget && *budget == 1 << 20,
+            "{scene}: {f:?}"
+        );
+        let text = f.to_string();
+        assert!(
+            text.starts_with("step 1 failed: out of memory: ")
+                && text.contains(what)
+                && text.contains("needs an estimated")
+                && text.contains("--max-memory")
+                && text.contains("grid.h"),
+            "{text}"
+        );
+        assert_eq!(sim.step_index(), 0, "{scene}");
+        // With the budget the build gives (half the available memory) it steps.
+        let mut sim = sim_with_budget(scene, Limits::default().max_memory);
+        sim.step_guarded().unwrap_or_else(|f| panic!("{scene}: {f}"));
+    }
+}
+
+#[test]
+fn memory_that_cannot_be_allocated_for_a_step_is_a_reported_failure() {
+    // The linear column at h = 0.05 m (160,000 points, 80,199 unknowns)
+    // under `ulimit -v` below its peak: the step's big buffers (the
+    // pattern, the matrix, the symbolic analysis, the factor and its
+    // workspace) are reserved fallibly, so the step fails with exit 1 and
+    // `out of memory` instead of aborting. (Allocations while the model is
+    // built, or the per-point mapping, still abort under a tight enough
+    // limit: the build-time estimate is what guards them.)
+    let dir = temp_path("hostile-ulimit", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("column.toml");
+    let text = edit(
+        "column-small-strain",
+        &[
+            ("size = [1.0, 12.0]", "size = [10.0, 12.0]"),
+            ("h = 0.5", "h = 0.05"),
+            ("max = [1.0, 10.0]", "max = [10.0, 10.0]"),
+            ("x = 1.0", "x = 10.0"),
+            ("tolerance = 1e-8", "tolerance = 1e-8\ncondition = \"off\""),
+        ],
+    );
+    std::fs::write(&p, text).unwrap();
+    let scene = p.to_str().unwrap();
+    let (code, out, err) = mpmlab(&["run", "--quiet", "--max-memory", "1T", scene]);
+    assert_eq!(code, 0, "{err}");
+    let peak_mb: f64 = out
+        .split("peak memory ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no peak memory in {out}"));
+    let run_limited = |kib: u64| {
+        let o = std::process::Command::new("sh")
+            .arg("-c")
+            .arg(format!("ulimit -v {kib} && exec \"$0\" run --max-memory 1T \"$1\""))
+            .arg(env!("CARGO_BIN_EXE_mpmlab"))
+            .arg(scene)
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let mut reported = Vec::new();
+    for fraction in [0.75, 0.8, 0.85, 0.9, 0.95] {
+        let kib = (fraction * peak_mb * 1e3) as u64;
+        let (code, out, err) = run_limited(kib);
+        match code {
+            Some(0) => {}
+            Some(1) => {
+                assert!(
+                    err.contains("step 1 failed: out of memory: ")
+                        && err.contains("could not be allocated")
+                        && err.contains("grid.h"),
+                    "ulimit -v {kib}: {err}"
+                );
+                assert!(out.starts_with("scene `column-small-strain`"), "{out}");
+                reported.push(err);
+            }
+            other => panic!("ulimit -v {kib}: exit {other:?}\n{out}\n{err}"),
+        }
+    }
+    assert!(
+        !reported.is_empty(),
+        "no limit between 0.75 and 0.95 of the {peak_mb} MB peak made the step fail"
+    );
+    eprintln!("{}", reported.join(""));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Mutations of shipped scenes for the property test.

@@ -848,3 +848,329 @@ fn events_of_one_step_stay_distinct_with_their_step() {
     assert_eq!((got[3].1, got[3].2), (1, "run complete"), "{got:?}");
     assert_eq!((got[4].1, got[4].2), (1, "end of interactive session"), "{got:?}");
 }
+
+/// The `mpmlab` binary running in the crate folder with its stdout piped
+/// (its stderr as `stderr` says).
+fn spawn_mpmlab(args: &[&std::ffi::OsStr], stderr: std::process::Stdio) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
+/// The step numbers of a run's table rows as they are printed (other lines
+/// are left out), read on a thread until the output closes.
+fn step_lines(child: &mut std::process::Child) -> std::sync::mpsc::Receiver<i64> {
+    use std::io::BufRead;
+    let out = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+            if let Some(Ok(k)) = line.split_whitespace().next().map(str::parse::<i64>) {
+                if tx.send(k).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    rx
+}
+
+/// Wait until the run has printed step `k` (at most a minute).
+fn wait_for_step(rx: &std::sync::mpsc::Receiver<i64>, k: i64) -> i64 {
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let left = until.saturating_duration_since(std::time::Instant::now());
+        match rx.recv_timeout(left) {
+            Ok(s) if s >= k => return s,
+            Ok(_) => {}
+            Err(e) => panic!("step {k} was never printed: {e}"),
+        }
+    }
+}
+
+/// Whether `path` is a recording rerun accepts as complete: every message
+/// decodes, and its footer holds a manifest per store that lists exactly
+/// the chunks the store has (what `rerun rrd verify` checks; the CLI is
+/// run too when it is installed, and must be in CI). Its recording chunks.
+fn verified_chunks(path: &std::path::Path) -> Vec<rerun::log::Chunk> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let file = std::fs::File::open(path).unwrap();
+    let mut it = DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
+    let mut per_store: BTreeMap<String, u64> = BTreeMap::new();
+    let mut chunks = Vec::new();
+    for msg in it.by_ref() {
+        if let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() {
+            *per_store.entry(format!("{store:?}")).or_default() += 1;
+            if store.is_recording() {
+                chunks.push(Chunk::from_arrow_msg(&arrow).unwrap());
+            }
+        }
+    }
+    let manifests = it.rrd_manifests().unwrap();
+    assert!(!manifests.is_empty(), "{}: no footer", path.display());
+    let listed: BTreeMap<String, u64> = manifests
+        .iter()
+        .map(|m| {
+            m.sanity_check_heavy().unwrap();
+            (format!("{:?}", m.store_id), m.data.num_rows() as u64)
+        })
+        .collect();
+    assert_eq!(
+        listed,
+        per_store,
+        "{}: the footer's manifests against the chunks",
+        path.display()
+    );
+    match std::process::Command::new("rerun")
+        .args(["rrd", "verify"])
+        .arg(path)
+        .output()
+    {
+        Ok(o) => assert!(
+            o.status.success(),
+            "rerun rrd verify {}: {}",
+            path.display(),
+            String::from_utf8_lossy(&o.stderr)
+        ),
+        Err(e) => {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "recordings are verified with the rerun CLI: {e} (.ci/run installs it with `python3 -m pip install rerun-sdk==0.36.3`)"
+            );
+            eprintln!("rerun rrd verify skipped: {e}");
+        }
+    }
+    chunks
+}
+
+/// Every step up to `last` has its metrics in `chunks`, and its points
+/// where the default cadence of the 1000-step collision puts them.
+fn holds_steps_up_to(chunks: &[rerun::log::Chunk], last: i64) {
+    let metrics: std::collections::BTreeSet<i64> = scalar_steps(chunks, "/metrics/unknowns").into_iter().collect();
+    let missing: Vec<i64> = (1..=last).filter(|k| !metrics.contains(k)).collect();
+    assert!(missing.is_empty(), "steps printed but not recorded: {missing:?}");
+    let sim = common::sim_with("ghost-collision-plastic", |_| {});
+    let a = &sim.model().analysis;
+    let plan = mpmlab::model::record::Plan::new(
+        sim.model().record.cadence,
+        sim.load_steps(),
+        sim.points().len(),
+        a.duration.map(|d| d / a.load_steps as f64),
+    );
+    let (points, _) = points_of(chunks);
+    let missing: Vec<i64> = (0..=last)
+        .filter(|&k| (k == 0 || plan.holds_points(k as usize)) && !points.contains(&k))
+        .collect();
+    assert!(missing.is_empty(), "steps printed without their points: {missing:?}");
+}
+
+#[test]
+fn a_killed_run_is_repaired_with_every_step_it_printed() {
+    // SIGKILL leaves no chance to close the file: it lacks rerun's footer.
+    // With --record-sync 0 every step is in the file before its row is
+    // printed; `mpmlab repair` writes the footer again.
+    let path = temp_path("rec-killed", "rrd");
+    let fixed = temp_path("rec-killed-repaired", "rrd");
+    let mut child = spawn_mpmlab(
+        &[
+            "run".as_ref(),
+            "scenarios/ghost-collision-plastic.toml".as_ref(),
+            "--record-sync".as_ref(),
+            "0".as_ref(),
+            "--record".as_ref(),
+            path.as_os_str(),
+        ],
+        std::process::Stdio::null(),
+    );
+    let rx = step_lines(&mut child);
+    let seen = wait_for_step(&rx, 20);
+    child.kill().unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), None, "killed by a signal");
+    // Rows already in the pipe were printed before the kill too.
+    let printed = rx.iter().fold(seen, i64::max);
+    assert!((20..1000).contains(&printed), "{printed}");
+    let file = std::fs::File::open(&path).unwrap();
+    let mut it = rerun::external::re_log_encoding::DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
+    it.by_ref().for_each(drop);
+    assert!(
+        it.rrd_manifests().unwrap().is_empty(),
+        "a killed run's file has no footer"
+    );
+
+    let (code, out, err) = common::mpmlab(&["repair", path.to_str().unwrap(), fixed.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("repaired"), "{out}");
+    assert!(
+        out.contains("without rerun's footer") || out.contains("incomplete message"),
+        "{out}"
+    );
+    let chunks = verified_chunks(&fixed);
+    holds_steps_up_to(&chunks, printed);
+    assert!(
+        out.contains(&format!(
+            "data up to step {}",
+            scalar_steps(&chunks, "/metrics/unknowns").last().unwrap()
+        )),
+        "{out}"
+    );
+
+    // The input is left alone; a second repair of a complete file copies it.
+    let again = temp_path("rec-killed-again", "rrd");
+    let (code, out, _) = common::mpmlab(&["repair", fixed.to_str().unwrap(), again.to_str().unwrap()]);
+    assert_eq!(code, 0);
+    assert!(out.contains("the recording was complete"), "{out}");
+    assert_eq!(read_chunks(&again).len(), chunks.len());
+    for p in [&path, &fixed, &again] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+#[test]
+fn repair_refuses_what_it_cannot_repair() {
+    let rec = temp_path("rec-refused", "rrd");
+    let out = temp_path("rec-refused-out", "rrd");
+    let r = |a: &std::path::Path, b: &std::path::Path| {
+        common::mpmlab(&["repair", a.to_str().unwrap(), b.to_str().unwrap()])
+    };
+    // Not a recording, or only its stream header: nothing to keep, nothing written.
+    std::fs::write(&rec, "step,load\n").unwrap();
+    let (code, _, err) = r(&rec, &out);
+    assert_eq!(code, 2);
+    assert!(err.contains("is not a rerun recording"), "{err}");
+    std::fs::write(&rec, b"RRF2\x00\x24\x03\x00\x01\x02\x00\x00").unwrap();
+    let (code, _, err) = r(&rec, &out);
+    assert_eq!(code, 2);
+    assert!(err.contains("holds no complete message"), "{err}");
+    assert!(!out.exists());
+    // The input itself, or a file that is not a recording, is not an output.
+    let (code, _, err) = r(&rec, &rec);
+    assert_eq!(code, 2);
+    assert!(err.contains("is the input itself"), "{err}");
+    let scene = common::scene_path("patch-compression");
+    let (code, _, err) = r(&rec, &scene);
+    assert_eq!(code, 2);
+    assert!(err.contains("is not a rerun recording; refusing to overwrite"), "{err}");
+    let _ = std::fs::remove_file(&rec);
+}
+
+#[test]
+fn a_second_signal_ends_the_run_at_once_and_its_recording_can_be_repaired() {
+    let path = temp_path("rec-two-signals", "rrd");
+    let fixed = temp_path("rec-two-signals-repaired", "rrd");
+    let mut child = spawn_mpmlab(
+        &[
+            "run".as_ref(),
+            "scenarios/ghost-collision-plastic.toml".as_ref(),
+            "--record-sync".as_ref(),
+            "0".as_ref(),
+            "--record".as_ref(),
+            path.as_os_str(),
+        ],
+        std::process::Stdio::null(),
+    );
+    let rx = step_lines(&mut child);
+    let seen = wait_for_step(&rx, 20);
+    let pid = child.id().to_string();
+    for _ in 0..2 {
+        let sent = std::process::Command::new("kill")
+            .args(["-INT", &pid])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+    }
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    let printed = rx.iter().fold(seen, i64::max);
+    // The first signal may have closed the file before the second came;
+    // either way the repaired file holds every printed step.
+    let (code, out, err) = common::mpmlab(&["repair", path.to_str().unwrap(), fixed.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("repaired"), "{out}");
+    holds_steps_up_to(&verified_chunks(&fixed), printed);
+    for p in [&path, &fixed] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+#[test]
+fn sigterm_during_a_long_step_stops_within_a_second_with_a_complete_recording() {
+    // The G 5.5 beam at h = 1/24 m: Newton steps of most of a second.
+    let text = std::fs::read_to_string(common::scene_path("elastic-beam-ghost"))
+        .unwrap()
+        .replace("h = 0.5\n", "h = 0.041666666666666664\n")
+        .replace("load_steps = 50", "load_steps = 10")
+        .replace("max_iterations = 10", "max_iterations = 30");
+    assert!(text.contains("0.0416") && text.contains("load_steps = 10") && text.contains("max_iterations = 30"));
+    let scene = temp_path("beam-fine", "toml");
+    std::fs::write(&scene, &text).unwrap();
+    let path = temp_path("rec-sigterm", "rrd");
+    let mut child = spawn_mpmlab(
+        &["run".as_ref(), scene.as_os_str(), "--record".as_ref(), path.as_os_str()],
+        std::process::Stdio::piped(),
+    );
+    let rx = step_lines(&mut child);
+    let seen = wait_for_step(&rx, 1);
+    // Into step 2.
+    std::thread::sleep(std::time::Duration::from_millis(150));
+    let sent = std::time::Instant::now();
+    let kill = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(took < std::time::Duration::from_secs(1), "stopped after {took:?}");
+    let printed = rx.iter().fold(seen, i64::max);
+    assert_eq!(printed, 1, "the signal came during step 2");
+    assert!(err.contains("interrupted after step 1"), "{err}");
+    let chunks = verified_chunks(&path);
+    assert_eq!(scalar_steps(&chunks, "/metrics/unknowns"), vec![1]);
+    let events = common::events(&path);
+    assert!(
+        events.iter().any(|e| e.contains("interrupted after step 1")),
+        "{events:?}"
+    );
+    for p in [&path, &scene] {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+#[test]
+fn a_step_beyond_the_memory_budget_is_an_error_event() {
+    // The step's factor is refused by its estimate (the budget, 1 MiB, is
+    // below what the process holds): the recording keeps the initial state
+    // and the failure, named as out of memory, at step 1.
+    let text = std::fs::read_to_string(common::scene_path("column-small-strain")).unwrap();
+    let scene = mpmlab::scene::Scene::parse(&text, "column-small-strain").unwrap();
+    let mut model = mpmlab::Model::build(&scene, &text, "column-small-strain").unwrap();
+    model.max_memory = 1 << 20;
+    let mut sim = mpmlab::Simulation::new(model);
+    let path = temp_path("rec-out-of-memory", "rrd");
+    let mut rec = Recorder::create(&path, &text, &sim, true).unwrap();
+    let failure = sim.step_guarded().unwrap_err();
+    assert!(
+        matches!(failure, mpmlab::StepFailure::OutOfMemory { step: 1, .. }),
+        "{failure:?}"
+    );
+    rec.log_failure(&failure, &sim).unwrap();
+    rec.finish().unwrap();
+    let events = common::events(&path);
+    let _ = std::fs::remove_file(&path);
+    assert!(
+        events.iter().any(
+            |e| e.starts_with("step 1 failed: out of memory: the Cholesky factor of")
+                && e.contains("needs an estimated")
+                && e.contains("grid.h")
+        ),
+        "{events:?}"
+    );
+}

@@ -172,6 +172,7 @@ pub(super) fn check_names(scene: &Scene) -> Result<(), FieldError> {
 /// points are generated, and the work of generating them.
 pub(super) struct Budget {
     max: u64,
+    kind: crate::scene::AnalysisKind,
     grid_nodes: u128,
     points: u128,
     active: u128,
@@ -183,6 +184,7 @@ impl Budget {
     pub(super) fn new(scene: &Scene, grid: &Grid, limits: &Limits) -> Result<Budget, FieldError> {
         let b = Budget {
             max: limits.max_memory,
+            kind: scene.analysis.kind,
             grid_nodes: grid.num_nodes() as u128,
             points: 0,
             active: 0,
@@ -206,8 +208,9 @@ impl Budget {
     }
 
     pub(super) fn total(&self) -> u128 {
-        self.grid_nodes * BYTES_PER_GRID_NODE as u128
-            + self.points * BYTES_PER_POINT as u128
+        BASE_BYTES as u128
+            + self.grid_nodes * bytes_per_grid_node(self.kind) as u128
+            + self.points * bytes_per_point(self.kind) as u128
             + self.active.min(self.grid_nodes) * BYTES_PER_ACTIVE_NODE as u128
             + self.dense()
     }
@@ -218,7 +221,7 @@ impl Budget {
             return Ok(());
         }
         let dense = self.dense();
-        let points = self.points * BYTES_PER_POINT as u128;
+        let points = self.points * bytes_per_point(self.kind) as u128;
         // Name what dominates: dense eigenvalues, the points or the grid.
         let (field, advice) = if dense >= points && dense * 2 >= total {
             (
@@ -233,12 +236,13 @@ impl Budget {
         Err(FieldError::new(
             field,
             format!(
-                "the model needs an estimated {} ({} points x {} + {} grid nodes x {} + {} active nodes x {}{}), more than the {} allowed (--max-memory; default half of the available memory); {advice}",
+                "the model needs an estimated {} ({} for the program + {} points x {} + {} grid nodes x {} + {} active nodes x {}{}), more than the {} allowed (--max-memory; default half of the available memory); {advice}",
                 bytes(total.min(u64::MAX as u128) as u64),
+                bytes(BASE_BYTES),
                 self.points,
-                bytes(BYTES_PER_POINT),
+                bytes(bytes_per_point(self.kind)),
                 self.grid_nodes,
-                bytes(BYTES_PER_GRID_NODE),
+                bytes(bytes_per_grid_node(self.kind)),
                 self.active.min(self.grid_nodes),
                 bytes(BYTES_PER_ACTIVE_NODE),
                 if dense > 0 {

@@ -95,6 +95,10 @@ pub struct Model {
     pub record: record::RecordSettings,
     /// Quantities followed through the run (`[[probe]]`).
     pub probes: Vec<crate::probe::Probe>,
+    /// The memory the process may use while stepping (bytes, the
+    /// `--max-memory` of the build): a factorisation whose estimate would
+    /// take the process beyond it is refused as a step failure.
+    pub max_memory: u64,
 }
 
 /// Largest grid the engine will build (cells).
@@ -117,20 +121,48 @@ pub const MAX_NAME: usize = 100;
 /// generation may test against each other.
 const MAX_GENERATION_WORK: u128 = 1_000_000_000;
 
+/// The memory estimate of a scene, checked against `--max-memory` before
+/// any point is made: [`BASE_BYTES`] + points x [`bytes_per_point`] + grid
+/// nodes x [`bytes_per_grid_node`] + the nodes the bodies' bounding boxes
+/// cover x [`BYTES_PER_ACTIVE_NODE`] + dense eigenvalues. Calibrated on the
+/// peaks (`VmHWM`, the `peak memory` of `mpmlab run --quiet`) of runs over
+/// a range of sizes, with the constants chosen so that every run's
+/// estimate lies 1.1 to 1.6 times above its peak (explicit runs up to 3
+/// times: the lumped mass needs no factor); `docs/scenes.md` lists them.
+/// The factor itself is estimated again at each step from its symbolic
+/// analysis ([`crate::linalg::check_memory`]), where fill-in is known.
+///
+/// The program itself (code, threads, allocator): 15-17 MB measured.
+pub const BASE_BYTES: u64 = 16 << 20;
+
 /// Estimated bytes per material point while stepping: the point arrays,
-/// its stencil (values, gradients, node indices), its constitutive
-/// response and its share of the recorded and reported fields. Measured
-/// peaks: 1.2 kB per point (a 10^6-point lattice, linear, standard basis,
-/// recorded), 1.6 kB (GIMP with Newton; explicit dynamics).
-pub const BYTES_PER_POINT: u64 = 4_096;
+/// its stencil (values, gradients, node indices), its constitutive response
+/// and its share of the recorded and reported fields. Measured: about
+/// 0.9 kB (linear, 4 to 16 points per cell, either basis) and 2 kB (finite
+/// deformation, which keeps F and the tangent per point).
+pub fn bytes_per_point(kind: crate::scene::AnalysisKind) -> u64 {
+    match kind {
+        crate::scene::AnalysisKind::QuasiStaticFinite => 2_048,
+        _ => 1_024,
+    }
+}
+
 /// Estimated bytes per grid node, for the per-node arrays every step
 /// allocates over the whole grid (dof numbering, prescribed values, nodal
-/// displacements and residuals, cell flags).
-pub const BYTES_PER_GRID_NODE: u64 = 512;
+/// displacements and residuals, cell flags; Newton keeps several per
+/// iteration). Measured: 1.2-1.5 kB with Newton.
+pub fn bytes_per_grid_node(kind: crate::scene::AnalysisKind) -> u64 {
+    match kind {
+        crate::scene::AnalysisKind::QuasiStaticFinite => 1_536,
+        _ => 512,
+    }
+}
+
 /// Estimated bytes per node a body may make active: its rows of the sparse
 /// stiffness (or mass) matrix and of the Cholesky factor with fill-in
-/// (measured: about 3.5 kB per node for 1.6e5 active nodes).
-pub const BYTES_PER_ACTIVE_NODE: u64 = 8_192;
+/// (measured: 1.5 kB per node at 1e4 nodes, 2.4 kB at 4e4; fill grows
+/// slowly with size, which the step's own check covers).
+pub const BYTES_PER_ACTIVE_NODE: u64 = 4_096;
 
 impl Model {
     /// Validate a parsed scene and build the model with the default
@@ -322,6 +354,7 @@ impl Model {
             exact,
             record,
             probes,
+            max_memory: limits.max_memory,
         })
     }
 }

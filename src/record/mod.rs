@@ -55,9 +55,14 @@
 //! the series. The recording is listed under its scene and run
 //! ([`recording_name`]).
 //!
+//! The file is flushed after a step once [`SYNC_PERIOD`] (or
+//! `--record-sync`) has passed, so a killed run leaves every step up to
+//! the last flush; [`repair`] writes the footer rerun adds at close.
+//!
 //! The engine knows nothing of this module: it reads reports and state.
 
 pub mod layout;
+pub mod repair;
 pub mod sweep;
 
 use crate::colormap;
@@ -137,10 +142,21 @@ impl Frame {
     }
 }
 
+/// What the recorder's thread is asked to do.
+enum Job {
+    /// Log a frame (its buffers come back on `spare`).
+    Frame(Frame),
+    /// Flush everything logged so far into the file (the frames before it
+    /// and whatever the engine's thread logged before sending it), then
+    /// answer with the error, if any.
+    Flush(SyncSender<Option<String>>),
+}
+
 /// The recorder's thread: logs the frames it is sent, returns their
-/// buffers, and keeps the first error for the engine's side to report.
+/// buffers, flushes when asked, and keeps the first error for the engine's
+/// side to report.
 struct FrameWriter {
-    frames: Option<SyncSender<Frame>>,
+    frames: Option<SyncSender<Job>>,
     spare: Receiver<Frame>,
     thread: Option<JoinHandle<()>>,
     error: Arc<Mutex<Option<String>>>,
@@ -150,7 +166,7 @@ impl FrameWriter {
     fn start(rec: RecordingStream, grid: crate::grid::Grid, legend: ColourBar) -> FrameWriter {
         // Two frames in flight at most: a slow disk slows the run down
         // instead of filling the memory.
-        let (tx, rx) = mpsc::sync_channel::<Frame>(1);
+        let (tx, rx) = mpsc::sync_channel::<Job>(1);
         let (spare_tx, spare) = mpsc::channel();
         let error = Arc::new(Mutex::new(None));
         let err = error.clone();
@@ -158,16 +174,31 @@ impl FrameWriter {
             .name("recorder".into())
             .spawn(move || {
                 let mut colors = Vec::new();
-                for f in rx {
+                let keep = |e: String| {
+                    if let Ok(mut slot) = err.lock() {
+                        slot.get_or_insert(e);
+                    }
+                };
+                for job in rx {
                     let failed = err.lock().map_or(true, |e| e.is_some());
-                    if !failed {
-                        if let Err(e) = write_frame(&rec, &grid, &legend, &f, &mut colors) {
-                            if let Ok(mut slot) = err.lock() {
-                                *slot = Some(e.to_string());
+                    match job {
+                        Job::Frame(f) => {
+                            if !failed {
+                                if let Err(e) = write_frame(&rec, &grid, &legend, &f, &mut colors) {
+                                    keep(e.to_string());
+                                }
                             }
+                            let _ = spare_tx.send(f);
+                        }
+                        Job::Flush(done) => {
+                            if !failed {
+                                if let Err(e) = rec.flush_blocking() {
+                                    keep(e.to_string());
+                                }
+                            }
+                            let _ = done.send(err.lock().ok().and_then(|e| e.clone()));
                         }
                     }
-                    let _ = spare_tx.send(f);
                 }
             })
             .ok();
@@ -181,6 +212,23 @@ impl FrameWriter {
 
     fn error(&self) -> Option<String> {
         self.error.lock().ok().and_then(|e| e.clone())
+    }
+
+    /// Wait until every frame sent and everything logged before this call
+    /// is written to the file (handed to the operating system: it survives
+    /// the process being killed).
+    fn sync(&self) -> Option<String> {
+        let Some(tx) = &self.frames else {
+            return self.error();
+        };
+        let (done, answer) = mpsc::sync_channel(1);
+        if tx.send(Job::Flush(done)).is_err() {
+            return Some(self.error().unwrap_or_else(|| "the recorder's thread stopped".into()));
+        }
+        match answer.recv() {
+            Ok(e) => e,
+            Err(_) => Some(self.error().unwrap_or_else(|| "the recorder's thread stopped".into())),
+        }
     }
 
     /// Wait for every frame sent to be logged.
@@ -446,7 +494,16 @@ pub struct Recorder {
     /// another thread than the one that created the recorder).
     step_now: std::cell::Cell<i64>,
     events: std::cell::Cell<i64>,
+    /// Wall time between flushes into the file ([`Recorder::sync`]) and
+    /// the last one.
+    sync_period: std::time::Duration,
+    last_sync: std::time::Instant,
 }
+
+/// The default time between flushes of a recording into its file: a
+/// killed run loses at most the steps of the last half second (and every
+/// step that took longer is in the file before the run reports it).
+pub const SYNC_PERIOD: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// The rerun version the recordings are written with; viewers read their
 /// own and the previous minor version only.
@@ -538,6 +595,8 @@ impl Recorder {
             marked: sim.load_steps() <= layout::MARKED_STEPS,
             step_now: std::cell::Cell::new(sim.step_index() as i64),
             events: std::cell::Cell::new(0),
+            sync_period: SYNC_PERIOD,
+            last_sync: std::time::Instant::now(),
         };
         let contents = contents(sim, colour);
         r.check(
@@ -558,6 +617,7 @@ impl Recorder {
             ),
             rerun::TextLogLevel::INFO,
         )?;
+        r.sync()?;
         Ok(r)
     }
 
@@ -700,7 +760,7 @@ impl Recorder {
         let mut frame = self.writer.spare.try_recv().unwrap_or_default();
         frame.fill(sim, self.field, &self.settings.fields);
         if let Some(tx) = &self.writer.frames {
-            if tx.send(frame).is_err() {
+            if tx.send(Job::Frame(frame)).is_err() {
                 return Err(RecordError::Write {
                     path: self.path.clone(),
                     message: self
@@ -880,7 +940,34 @@ impl Recorder {
         if self.plan.holds_points(report.step) {
             self.log_state(sim)?;
         }
+        if self.last_sync.elapsed() >= self.sync_period {
+            self.sync()?;
+        }
         Ok(())
+    }
+
+    /// The wall time between flushes into the file after a step
+    /// ([`SYNC_PERIOD`] by default; zero: after every step).
+    pub fn set_sync_period(&mut self, period: std::time::Duration) {
+        self.sync_period = period;
+    }
+
+    /// Write everything logged so far into the file: after it, a killed
+    /// process leaves a file holding every step logged (without rerun's
+    /// footer, which `mpmlab repair` adds: [`repair`]). It costs a few
+    /// milliseconds and, in the file, a chunk per entity (about a
+    /// kilobyte each): rerun cuts its batches at each call. Steps call it
+    /// once [`Recorder::set_sync_period`] has passed since the last one;
+    /// failures always.
+    pub fn sync(&mut self) -> Result<(), RecordError> {
+        self.last_sync = std::time::Instant::now();
+        match self.writer.sync() {
+            None => Ok(()),
+            Some(message) => Err(RecordError::Write {
+                path: self.path.clone(),
+                message,
+            }),
+        }
     }
 
     /// Explicit dynamics: energies, balance, momentum and (on condition
@@ -965,7 +1052,8 @@ impl Recorder {
         self.rec.set_time_sequence("step", failure.step() as i64);
         self.step_now.set(failure.step() as i64);
         self.event(&failure.to_string(), rerun::TextLogLevel::ERROR)?;
-        self.log_state(sim)
+        self.log_state(sim)?;
+        self.sync()
     }
 
     /// Log a text event at the current step (the last step logged; the

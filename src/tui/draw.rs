@@ -119,6 +119,10 @@ fn remedies(f: &StepFailure) -> &'static [&'static str] {
         StepFailure::LeftGrid { .. } => &["enlarge the grid in the scene file"],
         StepFailure::Boundary { .. } => &["check the boundary's points: it needs at least two, in order"],
         StepFailure::Internal { .. } => &["this is a bug: please report it with the scene file"],
+        StepFailure::OutOfMemory { .. } => &[
+            "use a larger grid h in the scene file (fewer unknowns)",
+            "start mpmlab with a larger --max-memory, if the machine has it",
+        ],
         StepFailure::Cancelled { .. } => &["space takes the step again (change parameters first if you like)"],
         StepFailure::Finished { .. } => &[],
     }
