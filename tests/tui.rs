@@ -237,9 +237,9 @@ fn sweep_view_shows_runs_and_charts() {
         })
         .sum();
     assert!(marks > 5, "{all}");
-    // Probes on three refinements get an estimates panel: tip = 2 - h^2
-    // (exact 2) has order 2, an estimated error 0.0625 equal to the true
-    // one (est/true 1.00).
+    // Probes on four refinements get an estimates panel: tip = 2 - h^2
+    // (exact 2) has order 2, confirmed by the coarser triple, an estimated
+    // error 0.015625 equal to the true one (est/true 1.00), GCI 1.25 x it.
     let probed = |h: f64| RunResult {
         probes: vec![("tip:uy".into(), 2.0 - h * h)],
         exact: vec![("probe:tip:uy".into(), 2.0)],
@@ -247,7 +247,7 @@ fn sweep_view_shows_runs_and_charts() {
     };
     let estimated = SweepView {
         title: "demo".into(),
-        results: vec![probed(1.0), probed(0.5), probed(0.25)],
+        results: vec![probed(1.0), probed(0.5), probed(0.25), probed(0.125)],
         scroll: 0,
     };
     for (w, hgt) in [(100, 30), (160, 48)] {
@@ -262,13 +262,13 @@ fn sweep_view_shows_runs_and_charts() {
                     + "\n"
             })
             .collect();
-        assert!(all.contains("error estimates at h = 0.25"), "{all}");
+        assert!(all.contains("error estimates at h = 0.125"), "{all}");
         let row = all
             .lines()
             .find(|l| l.contains("tip:uy"))
             .unwrap_or_else(|| panic!("{all}"));
         assert!(
-            row.contains("2.00") && row.contains("7.81e-2") && row.contains("1.00"),
+            row.contains("2.00") && row.contains("1.95e-2") && row.contains("1.00"),
             "{row}"
         );
     }

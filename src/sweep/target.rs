@@ -9,8 +9,9 @@
 //! - `error:<name>` (a scene with an exact solution): the measured error;
 //! - `probe:<name>:<key>` or `energy:<name>`: the relative GCI of the three
 //!   finest runs of the family ([`super::estimate`]), trusted only when the
-//!   triple converges monotonically with a credible order (otherwise the
-//!   family refines on).
+//!   triple converges monotonically with a credible order that the next
+//!   coarser triple confirms (so at least four runs; otherwise the family
+//!   refines on).
 //!
 //! With two measures the observed order `p` predicts the cell size that
 //! meets the target, `h* = h (TOL / e)^(1/p)`; the next run is the largest
@@ -111,8 +112,9 @@ pub fn measure(target: &Target, family: &[RunResult]) -> (f64, String) {
     if family.len() < 3 {
         return (f64::NAN, "an estimate needs three refinements".into());
     }
-    let est = estimate::estimates(&family[family.len() - 3..], "h");
-    match est.iter().find(|e| e.quantity == target.quantity) {
+    let est = estimate::estimates(family, "h");
+    let finest = estimate::finest(&est);
+    match finest.iter().find(|e| e.quantity == target.quantity) {
         None => (f64::NAN, format!("the run reports no `{}`", target.quantity)),
         Some(e) if matches!(e.behaviour, Behaviour::Monotone | Behaviour::Resolved) => {
             (e.relative_gci(), String::new())

@@ -780,13 +780,10 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
                     r.step, r.load_steps, r.unknowns
                 )));
                 lines.extend(dynamics_lines(r, d, app.units));
+                lines.extend(errors_line(r));
                 lines.extend(r.probes.iter().map(|p| Line::raw(probe_line(p, app.units))));
             } else {
                 static_lines(r, app.units, &mut lines);
-            }
-            if !r.errors.is_empty() {
-                let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
-                lines.push(Line::raw(format!("errors: {}", e.join("  "))));
             }
         }
     }
@@ -796,6 +793,12 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
             .block(Block::default().borders(Borders::ALL).title(" last step ")),
         area,
     );
+}
+
+/// The errors against the exact solution on one line, if the scene has one.
+fn errors_line(r: &StepReport) -> Option<Line<'static>> {
+    let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
+    (!e.is_empty()).then(|| Line::raw(format!("errors: {}", e.join("  "))))
 }
 
 /// A probe's values on one line: `tip: u (ux, uy) m  s (xx, yy, xy) Pa`.
@@ -870,7 +873,9 @@ fn static_lines(r: &StepReport, u: Units, lines: &mut Vec<Line<'static>>) {
         "energy: strain {:.4e} {en}  work {:.4e} {en}",
         r.energy.strain, r.energy.external_work
     )));
-    // The probes the scene asks for, before the per-boundary lines.
+    // The errors against the exact solution, then the probes the scene
+    // asks for: before the per-boundary lines, which a short panel cuts.
+    lines.extend(errors_line(r));
     lines.extend(r.probes.iter().map(|p| Line::raw(probe_line(p, u))));
     let t = &r.timings;
     lines.push(Line::raw(format!(

@@ -173,7 +173,7 @@ fn draw_estimates(frame: &mut Frame, est: &[crate::sweep::estimate::Estimate], a
     let rows = est.iter().map(|e| {
         let color = match e.behaviour {
             Behaviour::Monotone | Behaviour::Resolved => Color::Green,
-            Behaviour::NotAsymptotic | Behaviour::Oscillatory => Color::Yellow,
+            Behaviour::Unconfirmed | Behaviour::NotAsymptotic | Behaviour::Oscillatory => Color::Yellow,
             Behaviour::Diverging => Color::Red,
         };
         let name = e.quantity.strip_prefix("probe:").unwrap_or(&e.quantity);
@@ -202,7 +202,7 @@ fn draw_estimates(frame: &mut Frame, est: &[crate::sweep::estimate::Estimate], a
         Table::new(rows, widths)
             .header(header)
             .block(Block::default().borders(Borders::ALL).title(format!(
-                " error estimates at h = {h} (GCI; order green: asymptotic, yellow: not, red: diverging) "
+                " error estimates at h = {h} (GCI; order green: confirmed, yellow: not, red: diverging) "
             ))),
         area,
     );
