@@ -668,3 +668,186 @@ fn canvas_shows_names_supports_loads_and_a_colour_bar() {
         assert!(all.contains("condition number per step") && all.contains('•'), "{all}");
     }
 }
+
+/// Whether a cell holds what a chart's curves draw.
+fn plotted(symbol: &str) -> bool {
+    symbol
+        .chars()
+        .any(|c| ('\u{2801}'..='\u{28ff}').contains(&c) || c == '•')
+}
+
+/// The legends of the charts hide no curve: the beam's condition numbers
+/// (with ghost low, without it rising to 1e26 and back) cross the top left
+/// of the plot, where the legend used to be; now it sits where no curve
+/// passes (160x48: top right) or, when every place would hide some, in
+/// the chart's bottom border (100x30). Read from the buffer: the cells the
+/// legend changes (against the same screen with `L`, legends off) hold no
+/// curve.
+#[test]
+fn chart_legends_hide_no_curve_at_two_sizes() {
+    let mut sim = sim_with("elastic-beam-ghost", |_| {});
+    let mut app = App::new(&sim, None);
+    for _ in 0..6 {
+        let r = sim.step().unwrap();
+        app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    }
+    app.apply(Action::NextChart);
+    assert_eq!(app.chart, mpmlab::tui::app::ChartKind::Condition);
+    let buffer = |app: &App, w: u16, h: u16| {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, app)).unwrap();
+        t.backend().buffer().clone()
+    };
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let shown = buffer(&app, w, h);
+        app.apply(Action::ToggleLegend);
+        let hidden = buffer(&app, w, h);
+        app.apply(Action::ToggleLegend);
+        let rows = screen_at(&app, w, h);
+        let all = rows.join("\n");
+        let top = rows
+            .iter()
+            .position(|l| l.contains("condition number per step"))
+            .unwrap() as u16;
+        let left = w / 2;
+        let bottom = (top + 1..h).find(|&y| shown[(left, y)].symbol() == "└").unwrap();
+        let text = |b: &ratatui::buffer::Buffer| -> String {
+            (top..=bottom)
+                .map(|y| (left..w).map(|x| b[(x, y)].symbol().to_string()).collect::<String>())
+                .collect::<Vec<_>>()
+                .join("\n")
+        };
+        assert!(text(&shown).contains("without ghost"), "{w}x{h}\n{all}");
+        assert!(!text(&hidden).contains("without ghost"), "{w}x{h}\n{}", text(&hidden));
+        let mut changed = 0;
+        for y in top + 1..bottom {
+            for x in left + 1..w - 1 {
+                if shown[(x, y)].symbol() != hidden[(x, y)].symbol() {
+                    changed += 1;
+                    assert!(
+                        !plotted(hidden[(x, y)].symbol()),
+                        "{w}x{h}: the legend hides a curve at ({x}, {y})\n{all}\n{}",
+                        text(&hidden)
+                    );
+                }
+            }
+        }
+        println!("{w}x{h}: the legend changes {changed} cells of the plot");
+        // The old place, the plot's top left (a box 15 x 4 for `with
+        // ghost`, `without ghost`): curves pass there.
+        let axis = (left + 1..w).find(|&x| hidden[(x, top + 1)].symbol() == "│").unwrap();
+        let under_old = (top + 1..top + 5)
+            .flat_map(|y| (axis + 1..axis + 16).map(move |x| (x, y)))
+            .filter(|&(x, y)| plotted(hidden[(x, y)].symbol()))
+            .count();
+        assert!(under_old > 0, "{w}x{h}\n{}", text(&hidden));
+    }
+}
+
+/// Nothing cut mid-word at either size: the errors against the exact
+/// solution (each name with its value on one line), the charts' titles,
+/// and both columns of the redo panel (a failed step's message and its
+/// residuals, wrapped between words).
+#[test]
+fn errors_titles_and_redo_panel_are_whole_words_at_two_sizes() {
+    let tokens = |rows: &[String]| -> std::collections::HashSet<String> {
+        rows.iter()
+            .flat_map(|r| {
+                r.chars()
+                    .map(|c| if "│┌┐└┘─├┤".contains(c) { ' ' } else { c })
+                    .collect::<String>()
+                    .split_whitespace()
+                    .map(str::to_string)
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    // The plate with a hole: four error measures.
+    let mut sim = sim_with("plate-hole-neumann", |_| {});
+    let mut app = App::new(&sim, None);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(
+        Box::new(r.clone()),
+        Box::new(View::of(&sim, app.view.field)),
+    ));
+    assert_eq!(r.errors.len(), 4);
+    let words = [
+        "residual",
+        "per",
+        "iteration",
+        "(log10;",
+        "v:",
+        "next",
+        "chart)",
+        "condition",
+        "number",
+        "step",
+        "(log10)",
+        "(v:",
+        "energy",
+        "(J/m)",
+        "errors",
+        "—",
+        "nothing",
+        "yet",
+    ];
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        for _ in 0..4 {
+            let rows = screen_at(&app, w, h);
+            let all = rows.join("\n");
+            for e in &r.errors {
+                let pair = format!("{}\u{a0}{:.3e}", e.name, e.value);
+                assert!(all.contains(&pair), "{w}x{h}: {pair}\n{all}");
+            }
+            // The chart's title: whole words only.
+            let row = rows.iter().find(|l| l.contains(" per ")).unwrap();
+            let title: String = row.chars().skip(w as usize / 2).collect();
+            let title = title.trim_matches(|c| "┌┐─ ".contains(c));
+            for t in title.split_whitespace() {
+                assert!(words.contains(&t), "{w}x{h}: `{t}` in `{title}`");
+            }
+            app.apply(Action::NextChart);
+        }
+        app.apply(Action::NextChart);
+    }
+    // The redo panel: a failed step (its message lists eleven residuals)
+    // against the step redone with ghost.
+    let mut sim = sim_with("elastic-beam-ghost", |s| {
+        s.grid.h = 0.25;
+        s.analysis.gamma_k = 0.0;
+    });
+    let mut app = App::new(&sim, None);
+    let (snapshot, failure) = loop {
+        let snap = sim.snapshot();
+        match sim.step() {
+            Ok(r) => app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field)))),
+            Err(f) => break (snap, f),
+        }
+    };
+    app.update(Update::Failed(failure.clone()));
+    app.apply(Action::RaiseGammaK);
+    assert_eq!(app.apply(Action::Redo), Some(Command::Redo));
+    sim.restore(&snapshot);
+    let mut p = sim.params().clone();
+    p.gamma_k = 12.0e6;
+    sim.set_params(p);
+    let after = sim.step().unwrap();
+    let expected: Vec<String> = failure
+        .to_string()
+        .split_whitespace()
+        .map(str::to_string)
+        .chain(failure.residuals().iter().map(|x| format!("{x:.1e}")))
+        .chain(after.residuals.iter().map(|x| format!("{x:.1e}")))
+        .collect();
+    app.update(Update::Redone(
+        Box::new((Err(failure), Ok(after))),
+        Box::new(View::of(&sim, app.view.field)),
+    ));
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let rows = screen_at(&app, w, h);
+        let have = tokens(&rows);
+        for t in &expected {
+            assert!(have.contains(t), "{w}x{h}: `{t}` is not whole\n{}", rows.join("\n"));
+        }
+    }
+}
