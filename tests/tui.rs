@@ -851,3 +851,59 @@ fn errors_titles_and_redo_panel_are_whole_words_at_two_sizes() {
         }
     }
 }
+
+/// The sweep view's stability map hides no failed run: G Table 5's 15
+/// rows of settings do not fit at 100x30; the rows with failures are kept
+/// (the last two here), and a line counts the completed rows left out.
+#[test]
+fn sweep_stability_map_shows_every_failure_at_two_sizes() {
+    use mpmlab::sweep::RunResult;
+    use mpmlab::tui::sweep::{draw as draw_sweep, SweepView};
+    let mut results = Vec::new();
+    for h in ["0.5", "0.25", "0.125"] {
+        for ppc in ["2", "3", "4", "5", "6"] {
+            for g in ["12e6", "0"] {
+                let fails =
+                    g == "0" && (h, ppc) != ("0.125", "2") && (h == "0.125" && ppc >= "5" || h == "0.5" && ppc == "2");
+                results.push(RunResult {
+                    id: format!("h={h}_ppc={ppc}_gamma_k={g}"),
+                    settings: vec![
+                        ("h".into(), h.into()),
+                        ("ppc".into(), ppc.into()),
+                        ("gamma_k".into(), g.into()),
+                    ],
+                    completed: !fails,
+                    failed_step: if fails { 13 } else { 0 },
+                    wall_s: 1.0,
+                    ..Default::default()
+                });
+            }
+        }
+    }
+    let failed = results.iter().filter(|r| !r.completed).count();
+    assert_eq!(failed, 3);
+    let view = SweepView {
+        title: "beam-stability".into(),
+        results,
+        scroll: 0,
+    };
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw_sweep(f, &view)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let rows: Vec<String> = (0..h)
+            .map(|y| (0..w / 2).map(|x| buf[(x, y)].symbol().to_string()).collect())
+            .collect();
+        let top = rows.iter().position(|l| l.contains("stability map")).unwrap();
+        let map = rows[top..].join("\n");
+        assert!(
+            map.contains(&format!("stability map ({failed} failed)")),
+            "{w}x{h}\n{map}"
+        );
+        assert_eq!(map.matches("FAIL").count(), failed, "{w}x{h}\n{map}");
+        assert!(map.contains("h=0.125 ppc=6"), "{w}x{h}\n{map}");
+        if w == 100 {
+            assert!(map.contains("more rows, all ok"), "{w}x{h}\n{map}");
+        }
+    }
+}

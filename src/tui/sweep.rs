@@ -94,7 +94,8 @@ pub fn draw(frame: &mut Frame, v: &SweepView) {
         title,
     );
     let [left, right] = Layout::horizontal([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(body);
-    let [table, map] = Layout::vertical([Constraint::Min(5), Constraint::Length(stability_height(v))]).areas(left);
+    let [table, map] =
+        Layout::vertical([Constraint::Min(5), Constraint::Length(stability_height(v, left.height))]).areas(left);
     draw_table(frame, v, table);
     draw_stability(frame, v, map);
     let [top, bottom] = Layout::vertical([Constraint::Percentage(50), Constraint::Percentage(50)]).areas(right);
@@ -174,8 +175,10 @@ fn stability_grid(v: &SweepView) -> Grid {
     Grid { rows, cols, cells }
 }
 
-fn stability_height(v: &SweepView) -> u16 {
-    (stability_grid(v).rows.len() as u16 + 3).min(16)
+/// Rows for the stability map: all of them where they fit in half the
+/// column (at least 16), the table keeping the rest.
+fn stability_height(v: &SweepView, column: u16) -> u16 {
+    (stability_grid(v).rows.len() as u16 + 3).min((column / 2).max(16))
 }
 
 /// Which settings completed: a row per combination of the other settings,
@@ -189,7 +192,23 @@ fn draw_stability(frame: &mut Frame, v: &SweepView, area: Rect) {
         "",
         cols.iter().map(|c| format!("{c:<width$}")).collect::<String>()
     ))];
-    for (i, r) in rows.iter().enumerate() {
+    // Where not every row fits, the rows with a failed run come first (in
+    // their order), then completed ones, and a last line counts the rest:
+    // a failure is never hidden for want of room.
+    let failing = |i: usize| cells.iter().any(|c| c.0 == i && !c.2);
+    let room = area.height.saturating_sub(3) as usize;
+    let shown: Vec<usize> = if rows.len() <= room {
+        (0..rows.len()).collect()
+    } else {
+        let keep = room.saturating_sub(1);
+        let mut pick: Vec<usize> = (0..rows.len()).filter(|&i| failing(i)).take(keep).collect();
+        let more = keep - pick.len();
+        pick.extend((0..rows.len()).filter(|&i| !failing(i)).take(more));
+        pick.sort_unstable();
+        pick
+    };
+    let failed = v.results.iter().filter(|r| !r.completed).count();
+    for (i, r) in rows.iter().enumerate().filter(|(i, _)| shown.contains(i)) {
         let mut spans = vec![Span::raw(format!("{:<label$}", if r.is_empty() { "runs" } else { r }))];
         for j in 0..cols.len() {
             let (text, color) = match cells.iter().find(|c| c.0 == i && c.1 == j) {
@@ -201,8 +220,24 @@ fn draw_stability(frame: &mut Frame, v: &SweepView, area: Rect) {
         }
         lines.push(Line::from(spans));
     }
+    let hidden: Vec<usize> = (0..rows.len()).filter(|i| !shown.contains(i)).collect();
+    if !hidden.is_empty() {
+        let with = hidden.iter().filter(|&&i| failing(i)).count();
+        lines.push(Line::styled(
+            if with == 0 {
+                format!("... {} more rows, all ok", hidden.len())
+            } else {
+                format!("... {} more rows, {with} with failures", hidden.len())
+            },
+            Style::new().fg(if with == 0 { Color::Gray } else { Color::Red }),
+        ));
+    }
     frame.render_widget(
-        Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(" stability map ")),
+        Paragraph::new(lines).block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(format!(" stability map ({failed} failed) ")),
+        ),
         area,
     );
 }
