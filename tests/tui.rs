@@ -212,6 +212,7 @@ fn sweep_view_shows_runs_and_charts() {
             run(0.125, f64::NAN, 1e-2, false),
         ],
         scroll: 0,
+        show_legend: true,
     };
     let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
     t.draw(|f| draw_sweep(f, &view)).unwrap();
@@ -253,6 +254,7 @@ fn sweep_view_shows_runs_and_charts() {
         title: "delta".into(),
         results: vec![run(1e-1), run(1e-2), run(1e-3)],
         scroll: 0,
+        show_legend: true,
     };
     let mut t = Terminal::new(TestBackend::new(160, 48)).unwrap();
     t.draw(|f| draw_sweep(f, &view)).unwrap();
@@ -886,6 +888,7 @@ fn sweep_stability_map_shows_every_failure_at_two_sizes() {
         title: "beam-stability".into(),
         results,
         scroll: 0,
+        show_legend: true,
     };
     for (w, h) in [(100u16, 30u16), (160, 48)] {
         let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
@@ -905,5 +908,75 @@ fn sweep_stability_map_shows_every_failure_at_two_sizes() {
         if w == 100 {
             assert!(map.contains("more rows, all ok"), "{w}x{h}\n{map}");
         }
+    }
+}
+
+/// The sweep view's charts place their legends as the main screen does:
+/// error against h falls to the bottom left, so the old place, the top
+/// right, covered the curve; the cells the legend changes (against `L`,
+/// legends off) hold no curve, at both sizes.
+#[test]
+fn sweep_chart_legends_hide_no_curve_at_two_sizes() {
+    use mpmlab::sweep::RunResult;
+    use mpmlab::tui::sweep::{draw as draw_sweep, SweepView};
+    let run = |h: f64, e: f64, t: f64| RunResult {
+        id: format!("h={h}"),
+        settings: vec![("h".into(), h.to_string())],
+        completed: true,
+        wall_s: t,
+        errors: vec![("stress_l2".into(), e)],
+        condition: f64::NAN,
+        ..Default::default()
+    };
+    let mut view = SweepView {
+        title: "demo".into(),
+        results: vec![
+            run(1.0, 1e-1, 1e-3),
+            run(0.5, 5e-2, 4e-3),
+            run(0.25, 2.5e-2, 1.6e-2),
+            run(0.125, 1.25e-2, 6.4e-2),
+        ],
+        scroll: 0,
+        show_legend: true,
+    };
+    let buffer = |v: &SweepView, w: u16, h: u16| {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw_sweep(f, v)).unwrap();
+        t.backend().buffer().clone()
+    };
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let shown = buffer(&view, w, h);
+        view.show_legend = false;
+        let hidden = buffer(&view, w, h);
+        view.show_legend = true;
+        let row = |b: &ratatui::buffer::Buffer, y: u16| -> String {
+            (w / 2..w).map(|x| b[(x, y)].symbol().to_string()).collect()
+        };
+        let top = (0..h)
+            .find(|&y| row(&shown, y).contains("(dots) against h"))
+            .unwrap_or_else(|| panic!("{}", (0..h).map(|y| row(&shown, y)).collect::<Vec<_>>().join("\n")));
+        let bottom = (top + 1..h).find(|&y| shown[(w / 2, y)].symbol() == "└").unwrap();
+        let text = |b: &ratatui::buffer::Buffer| (top..=bottom).map(|y| row(b, y)).collect::<Vec<_>>().join("\n");
+        assert!(text(&shown).contains("rate 1.00"), "{w}x{h}\n{}", text(&shown));
+        assert!(!text(&hidden).contains("rate 1.00"), "{w}x{h}\n{}", text(&hidden));
+        for y in top + 1..bottom {
+            for x in w / 2 + 1..w - 1 {
+                if shown[(x, y)].symbol() != hidden[(x, y)].symbol() {
+                    assert!(
+                        !plotted(hidden[(x, y)].symbol()),
+                        "{w}x{h}: the legend hides a curve at ({x}, {y})\n{}\n{}",
+                        text(&shown),
+                        text(&hidden)
+                    );
+                }
+            }
+        }
+        // The old place, the plot's top right (a box of at least 11 x 3
+        // for `rate 1.00`): the curve ends there.
+        let under_old = (top + 1..top + 4)
+            .flat_map(|y| (w - 12..w - 1).map(move |x| (x, y)))
+            .filter(|&(x, y)| plotted(hidden[(x, y)].symbol()))
+            .count();
+        assert!(under_old > 0, "{w}x{h}\n{}", text(&hidden));
     }
 }

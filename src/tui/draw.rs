@@ -582,8 +582,12 @@ fn framed<'a>(
         .y_axis(Axis::default().bounds(y.0).labels(y.1))
 }
 
-/// A named, coloured series of a chart with a legend.
-type Named<'a> = (&'a str, Color, &'a [(f64, f64)]);
+/// An axis: its bounds and its two end labels.
+pub(crate) type AxisEnds = ([f64; 2], [String; 2]);
+
+/// A named, coloured series of a chart with a legend: name, colour, data,
+/// and whether its points are joined by lines (else scattered).
+pub(crate) type Named<'a> = (&'a str, Color, &'a [(f64, f64)], bool);
 
 /// A chart of named series whose legend hides none of their curves: in
 /// the corner (or edge) of the plot where the curves cross no cell under
@@ -599,14 +603,42 @@ fn with_legend<'a>(
     show: bool,
 ) -> ratatui::widgets::Chart<'a> {
     use ratatui::widgets::{Axis, Chart, Dataset};
-    let datasets: Vec<Dataset<'a>> = series.iter().map(|(n, c, d)| line(n, *c, d)).collect();
-    let placement = if show { legend_place(series, &x, &y, area) } else { None };
-    let mut block = Block::default().borders(Borders::ALL).title(title);
+    let datasets: Vec<Dataset<'a>> = series.iter().map(|(n, c, d, _)| line(n, *c, d)).collect();
+    let chart = Chart::new(datasets)
+        .x_axis(Axis::default().bounds(x.0).labels(x.1.clone()))
+        .y_axis(Axis::default().bounds(y.0).labels(y.1.clone()));
+    place_legend(
+        chart,
+        Block::default().borders(Borders::ALL).title(title),
+        series,
+        (&x, &y),
+        area,
+        show,
+    )
+}
+
+/// Give `chart` its `block` and a legend of `series` that hides none of
+/// their curves ([`legend_place`]): in the plot, or as coloured names in
+/// the block's bottom border; none without `show`. `axes` are the chart's
+/// bounds and end labels.
+pub(crate) fn place_legend<'a>(
+    chart: ratatui::widgets::Chart<'a>,
+    mut block: Block<'a>,
+    series: &[Named],
+    axes: (&AxisEnds, &AxisEnds),
+    area: Rect,
+    show: bool,
+) -> ratatui::widgets::Chart<'a> {
+    let placement = if show {
+        legend_place(series, axes.0, axes.1, area)
+    } else {
+        None
+    };
     let position = match placement {
         Some(Ok(p)) => Some(p),
         Some(Err(())) => {
             let mut spans = vec![Span::raw(" ")];
-            for (name, color, _) in series.iter().filter(|s| !s.0.is_empty() && !s.2.is_empty()) {
+            for (name, color, _, _) in series.iter().filter(|s| !s.0.is_empty() && !s.2.is_empty()) {
                 spans.push(Span::styled(format!("■ {name}"), Style::new().fg(*color)));
                 spans.push(Span::raw(" "));
             }
@@ -615,10 +647,8 @@ fn with_legend<'a>(
         }
         None => None,
     };
-    Chart::new(datasets)
+    chart
         .block(block)
-        .x_axis(Axis::default().bounds(x.0).labels(x.1))
-        .y_axis(Axis::default().bounds(y.0).labels(y.1))
         .legend_position(position)
         .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1)))
 }
@@ -629,10 +659,10 @@ fn with_legend<'a>(
 /// does not fit, `None` when there is nothing to name. The plot's cells
 /// follow ratatui's chart layout for a bordered chart with end labels on
 /// both axes and no axis titles.
-fn legend_place(
+pub(crate) fn legend_place(
     series: &[Named],
-    x: &([f64; 2], [String; 2]),
-    y: &([f64; 2], [String; 2]),
+    x: &AxisEnds,
+    y: &AxisEnds,
     area: Rect,
 ) -> Option<Result<ratatui::widgets::LegendPosition, ()>> {
     use ratatui::widgets::LegendPosition as P;
@@ -683,7 +713,7 @@ fn legend_place(
                 mark(d, (2, 4));
             }
         }
-        for w in pts.windows(2) {
+        for w in pts.windows(2).filter(|_| s.3) {
             let (Some(a), Some(b)) = (at(w[0], 2 * gwu, 4 * ghu), at(w[1], 2 * gwu, 4 * ghu)) else {
                 continue;
             };
@@ -822,7 +852,7 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
     let named: Vec<Named> = series
         .iter()
         .enumerate()
-        .map(|(k, (name, data))| (name.as_str(), colors[k % colors.len()], data.as_slice()))
+        .map(|(k, (name, data))| (name.as_str(), colors[k % colors.len()], data.as_slice(), true))
         .collect();
     let mut title = if named.is_empty() {
         format!("{title}— nothing yet ")
@@ -876,7 +906,7 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
     let named: Vec<Named> = parts
         .iter()
         .zip(&series)
-        .map(|((name, color, _), s)| (*name, *color, s.as_slice()))
+        .map(|((name, color, _), s)| (*name, *color, s.as_slice(), true))
         .collect();
     let chart = with_legend(
         &named,

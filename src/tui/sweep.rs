@@ -1,14 +1,15 @@
 //! The sweep view (`mpmlab tui --sweep DIR`): a finished or running
 //! sweep's table, error against wall time with the Pareto front, error
 //! against h, and which runs completed. State, pure drawing, and a small
-//! event loop (arrows/jk scroll, r reloads, q or Esc quits).
+//! event loop (arrows/jk scroll, r reloads, L hides the legends, q or Esc quits).
 
+use super::draw::{place_legend, AxisEnds, Named};
 use crate::sweep::{pareto_front, RunResult};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
-use ratatui::widgets::{Axis, Block, Borders, Cell, Chart, Dataset, GraphType, LegendPosition, Paragraph, Row, Table};
+use ratatui::widgets::{Axis, Block, Borders, Cell, Chart, Dataset, GraphType, Paragraph, Row, Table};
 use ratatui::Frame;
 
 /// What the sweep view shows.
@@ -17,11 +18,20 @@ pub struct SweepView {
     pub results: Vec<RunResult>,
     /// First table row shown.
     pub scroll: usize,
+    /// The charts' legends (`L` hides them).
+    pub show_legend: bool,
 }
 
 /// Log10 of the positive finite values, else `None`.
 fn lg(v: f64) -> Option<f64> {
     (v > 0.0 && v.is_finite()).then(|| v.log10())
+}
+
+/// An axis's bounds with its two end labels, as the legend placement
+/// takes them.
+fn ends(bounds: [f64; 2], labels: Vec<String>) -> AxisEnds {
+    let mut l = labels.into_iter();
+    (bounds, [l.next().unwrap_or_default(), l.next().unwrap_or_default()])
 }
 
 /// Bounds with a little margin, and decade labels.
@@ -102,7 +112,7 @@ pub fn draw(frame: &mut Frame, v: &SweepView) {
     draw_time_chart(frame, v, top);
     draw_h_chart(frame, v, bottom);
     frame.render_widget(
-        Paragraph::new(" up/down scroll · r reload · q quit").style(Style::new().fg(Color::Gray)),
+        Paragraph::new(" up/down scroll · r reload · L legends · q quit").style(Style::new().fg(Color::Gray)),
         status,
     );
 }
@@ -268,19 +278,18 @@ fn draw_time_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
             .style(Style::new().fg(Color::Red))
             .data(&line),
     ];
-    frame.render_widget(
-        Chart::new(data.to_vec())
-            .block(
-                Block::default()
-                    .borders(Borders::ALL)
-                    .title(format!(" {} against wall time (log-log) ", v.error_name())),
-            )
-            .x_axis(Axis::default().bounds(xb).labels(xl))
-            .y_axis(Axis::default().bounds(yb).labels(yl))
-            .legend_position(Some(LegendPosition::TopRight))
-            .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1))),
-        area,
-    );
+    let named: [Named; 2] = [
+        ("runs", Color::Cyan, &all, false),
+        ("Pareto front", Color::Red, &line, true),
+    ];
+    let (x, y) = (ends(xb, xl), ends(yb, yl));
+    let chart = Chart::new(data.to_vec())
+        .x_axis(Axis::default().bounds(xb).labels(x.1.clone()))
+        .y_axis(Axis::default().bounds(yb).labels(y.1.clone()));
+    let block = Block::default()
+        .borders(Borders::ALL)
+        .title(format!(" {} against wall time (log-log) ", v.error_name()));
+    frame.render_widget(place_legend(chart, block, &named, (&x, &y), area, v.show_legend), area);
 }
 
 /// The error (lines, with the observed rate) and the condition number
@@ -335,39 +344,48 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
         Color::Blue,
         Color::White,
     ];
-    let data: Vec<Dataset> = groups
+    // Each series' legend name (lines with their observed rate) and colour.
+    let names: Vec<(String, Color)> = groups
         .iter()
         .enumerate()
         .map(|(k, (label, pts, cond))| {
             if *cond {
-                return Dataset::default()
-                    .name(label.clone())
-                    .marker(Marker::Dot)
-                    .graph_type(GraphType::Scatter)
-                    .style(Style::new().fg(Color::Gray))
-                    .data(pts);
+                return (label.clone(), Color::Gray);
             }
             let rate = match (pts.first(), pts.last()) {
                 (Some(a), Some(b)) if b.0 != a.0 => format!(" (rate {:.2})", (b.1 - a.1) / (b.0 - a.0)),
                 _ => String::new(),
             };
+            (format!("{label}{rate}"), colors[k % colors.len()])
+        })
+        .collect();
+    let data: Vec<Dataset> = groups
+        .iter()
+        .zip(&names)
+        .map(|((_, pts, cond), (name, color))| {
+            let (marker, kind) = if *cond {
+                (Marker::Dot, GraphType::Scatter)
+            } else {
+                (Marker::Braille, GraphType::Line)
+            };
             Dataset::default()
-                .name(format!("{label}{rate}"))
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .style(Style::new().fg(colors[k % colors.len()]))
+                .name(name.clone())
+                .marker(marker)
+                .graph_type(kind)
+                .style(Style::new().fg(*color))
                 .data(pts)
         })
         .collect();
-    frame.render_widget(
-        Chart::new(data)
-            .block(block)
-            .x_axis(Axis::default().bounds(xb).labels(xl))
-            .y_axis(Axis::default().bounds(yb).labels(yl))
-            .legend_position(Some(LegendPosition::TopRight))
-            .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1))),
-        area,
-    );
+    let named: Vec<Named> = groups
+        .iter()
+        .zip(&names)
+        .map(|((_, pts, cond), (name, color))| (name.as_str(), *color, pts.as_slice(), !*cond))
+        .collect();
+    let (x, y) = (ends(xb, xl), ends(yb, yl));
+    let chart = Chart::new(data)
+        .x_axis(Axis::default().bounds(xb).labels(x.1.clone()))
+        .y_axis(Axis::default().bounds(yb).labels(y.1.clone()));
+    frame.render_widget(place_legend(chart, block, &named, (&x, &y), area, v.show_legend), area);
 }
 
 /// Show a sweep folder until the user quits; `r` re-reads it (a sweep
@@ -387,6 +405,7 @@ pub fn run(folder: &crate::sweep::Folder, title: &str) -> std::io::Result<()> {
         title: title.to_string(),
         results: load(),
         scroll: 0,
+        show_legend: true,
     };
     let mut terminal = ratatui::init();
     let result = (|| -> std::io::Result<()> {
@@ -403,6 +422,7 @@ pub fn run(folder: &crate::sweep::Folder, title: &str) -> std::io::Result<()> {
                     }
                     KeyCode::Up | KeyCode::Char('k') => view.scroll = view.scroll.saturating_sub(1),
                     KeyCode::Char('r') => view.results = load(),
+                    KeyCode::Char('L') => view.show_legend = !view.show_legend,
                     _ => {}
                 }
             }
