@@ -808,6 +808,21 @@ fn errors_titles_and_redo_panel_are_whole_words_at_two_sizes() {
             for t in title.split_whitespace() {
                 assert!(words.contains(&t), "{w}x{h}: `{t}` in `{title}`");
             }
+            // Its bottom border (a legend there): whole names, then how
+            // many did not fit.
+            let top = rows.iter().position(|l| l.contains(" per ")).unwrap();
+            let border = rows[top + 1..]
+                .iter()
+                .find(|l| l.chars().nth(w as usize / 2) == Some('└'))
+                .unwrap();
+            let border: String = border.chars().skip(w as usize / 2).collect();
+            for t in border.trim_matches(|c| "└┘─ ".contains(c)).split_whitespace() {
+                let known = t == "■"
+                    || r.errors.iter().any(|e| e.name == t)
+                    || ["strain", "external", "work", "plastic", "K"].contains(&t)
+                    || t.strip_prefix('+').is_some_and(|n| n.parse::<usize>().is_ok());
+                assert!(known, "{w}x{h}: `{t}` in `{border}`");
+            }
             app.apply(Action::NextChart);
         }
         app.apply(Action::NextChart);

@@ -637,10 +637,27 @@ pub(crate) fn place_legend<'a>(
     let position = match placement {
         Some(Ok(p)) => Some(p),
         Some(Err(())) => {
+            // Whole names only: those that fit in the border, then how
+            // many are left out (L hides the legend to see the chart).
+            let named: Vec<&Named> = series.iter().filter(|s| !s.0.is_empty() && !s.2.is_empty()).collect();
+            let room = area.width.saturating_sub(4) as usize;
+            let items: Vec<String> = named.iter().map(|s| format!("■ {} ", s.0)).collect();
+            let all_fit = items.iter().map(|i| i.chars().count()).sum::<usize>() < room;
             let mut spans = vec![Span::raw(" ")];
-            for (name, color, _, _) in series.iter().filter(|s| !s.0.is_empty() && !s.2.is_empty()) {
-                spans.push(Span::styled(format!("■ {name}"), Style::new().fg(*color)));
-                spans.push(Span::raw(" "));
+            let mut used = 1;
+            for (k, (item, (_, color, _, _))) in items.into_iter().zip(&named).enumerate() {
+                let rest = named.len() - k - 1;
+                let tail = if all_fit || rest == 0 {
+                    0
+                } else {
+                    format!("+{rest} ").len()
+                };
+                if used + item.chars().count() + tail > room {
+                    spans.push(Span::raw(format!("+{} ", named.len() - k)));
+                    break;
+                }
+                used += item.chars().count();
+                spans.push(Span::styled(item, Style::new().fg(*color)));
             }
             block = block.title_bottom(Line::from(spans));
             None
