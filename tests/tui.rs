@@ -939,7 +939,7 @@ fn sweep_chart_legends_hide_no_curve_at_two_sizes() {
         settings: vec![("h".into(), h.to_string())],
         completed: true,
         wall_s: t,
-        errors: vec![("stress_l2".into(), e)],
+        errors: vec![("displacement_l2".into(), e)],
         condition: f64::NAN,
         ..Default::default()
     };
@@ -967,8 +967,29 @@ fn sweep_chart_legends_hide_no_curve_at_two_sizes() {
         let row = |b: &ratatui::buffer::Buffer, y: u16| -> String {
             (w / 2..w).map(|x| b[(x, y)].symbol().to_string()).collect()
         };
+        // Both titles in whole words (the long one shortened at 100x30).
+        for y in (0..h).filter(|&y| row(&shown, y).contains("displacement_l2 ")) {
+            let title = row(&shown, y);
+            let title = title.trim_matches(|c| "┌┐─ ".contains(c));
+            for t in title.split_whitespace() {
+                let whole = [
+                    "displacement_l2",
+                    "against",
+                    "wall",
+                    "time",
+                    "(log-log)",
+                    "(lines)",
+                    "and",
+                    "cond(K)",
+                    "(dots)",
+                    "h",
+                    "…",
+                ];
+                assert!(whole.contains(&t), "{w}x{h}: `{t}` in `{title}`");
+            }
+        }
         let top = (0..h)
-            .find(|&y| row(&shown, y).contains("(dots) against h"))
+            .find(|&y| row(&shown, y).contains("(lines) and cond(K)"))
             .unwrap_or_else(|| panic!("{}", (0..h).map(|y| row(&shown, y)).collect::<Vec<_>>().join("\n")));
         let bottom = (top + 1..h).find(|&y| shown[(w / 2, y)].symbol() == "└").unwrap();
         let text = |b: &ratatui::buffer::Buffer| (top..=bottom).map(|y| row(b, y)).collect::<Vec<_>>().join("\n");

@@ -27,6 +27,29 @@ fn lg(v: f64) -> Option<f64> {
     (v > 0.0 && v.is_finite()).then(|| v.log10())
 }
 
+/// A chart title of whole words in a block `width` wide: `main` and
+/// `extra` where both fit, else `main` alone, else `main`'s words that
+/// fit and an ellipsis.
+fn fit_title(main: &str, extra: &str, width: u16) -> String {
+    let room = width.saturating_sub(2) as usize;
+    let full = format!("{main}{extra}");
+    if full.chars().count() <= room {
+        return full;
+    }
+    if main.chars().count() < room {
+        return format!("{main} ");
+    }
+    let mut out = String::new();
+    for word in main.split_whitespace() {
+        if out.chars().count() + word.chars().count() + 4 > room {
+            break;
+        }
+        out.push(' ');
+        out.push_str(word);
+    }
+    format!("{out} … ")
+}
+
 /// An axis's bounds with its two end labels, as the legend placement
 /// takes them.
 fn ends(bounds: [f64; 2], labels: Vec<String>) -> AxisEnds {
@@ -286,9 +309,11 @@ fn draw_time_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
     let chart = Chart::new(data.to_vec())
         .x_axis(Axis::default().bounds(xb).labels(x.1.clone()))
         .y_axis(Axis::default().bounds(yb).labels(y.1.clone()));
-    let block = Block::default()
-        .borders(Borders::ALL)
-        .title(format!(" {} against wall time (log-log) ", v.error_name()));
+    let block = Block::default().borders(Borders::ALL).title(fit_title(
+        &format!(" {} against wall time", v.error_name()),
+        " (log-log) ",
+        area.width,
+    ));
     frame.render_widget(place_legend(chart, block, &named, (&x, &y), area, v.show_legend), area);
 }
 
@@ -307,9 +332,10 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
         return;
     };
     let h = key.as_str();
-    let block = Block::default().borders(Borders::ALL).title(format!(
-        " {} (lines) and cond(K) (dots) against {h} (log-log) ",
-        v.error_name()
+    let block = Block::default().borders(Borders::ALL).title(fit_title(
+        &format!(" {} (lines) and cond(K) (dots) against {h}", v.error_name()),
+        " (log-log) ",
+        area.width,
     ));
     // Each group's points from fine to coarse (log10 setting, log10 error),
     // then its condition numbers.
