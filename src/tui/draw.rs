@@ -683,7 +683,8 @@ pub(crate) fn legend_place(
     area: Rect,
 ) -> Option<Result<ratatui::widgets::LegendPosition, ()>> {
     use ratatui::widgets::LegendPosition as P;
-    let named: Vec<&Named> = series.iter().filter(|s| !s.0.is_empty() && !s.2.is_empty()).collect();
+    // Every named series has a line in ratatui's legend, even without data.
+    let named: Vec<&Named> = series.iter().filter(|s| !s.0.is_empty()).collect();
     let width = named.iter().map(|s| s.0.chars().count()).max()? as u16 + 2;
     let height = named.len() as u16 + 2;
     // The chart's inner area, less the x labels and axis (two rows) and
