@@ -3,8 +3,9 @@
 //! `--resume`) and end bit for bit where the uninterrupted run ends.
 //!
 //! A checkpoint holds everything a step reads that the scene does not
-//! give: the points (every array), the step, the accumulated work and
-//! strain energy, the active cells, the ghost faces, the iteration count,
+//! give: the points (every array), the step, the accumulated work,
+//! strain energy and ghost work (with the last ghost force), the active
+//! cells, the ghost faces, the iteration count,
 //! the implicit boundaries' offsets, the initial energy, and the settings
 //! that may change between steps ([`Params`]). The caches a step rebuilds
 //! (mass pattern, explicit buffers) are not kept.

@@ -174,6 +174,7 @@ pub fn columns(r: &StepReport, u: Units) -> Vec<(String, String)> {
             c.push((with_unit("strain_energy", u, Energy), num(e.strain)));
             c.push((with_unit("external_work", u, Energy), num(e.external_work)));
             c.push((with_unit("plastic_dissipation", u, Energy), num(e.plastic_dissipation)));
+            c.push((with_unit("ghost_energy", u, Energy), num(e.ghost)));
             c.push((with_unit("max_increment", u, Length), num(r.max_increment)));
             let s = r.solver.as_ref();
             c.push((

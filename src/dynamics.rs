@@ -564,6 +564,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
             external_work,
             plastic_dissipation: dissipation,
             kinetic,
+            ghost: 0.0,
         },
         condition,
         condition_unstabilised,

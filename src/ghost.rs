@@ -189,6 +189,36 @@ fn face_matrix(grid: &Grid, a: usize, b: usize) -> GhostFace {
     }
 }
 
+/// The ghost force `f_G = gamma (J_G (x) I_2) d` at every grid node for a
+/// step whose nodal increment is `d` (N per unit thickness); empty when
+/// there are no faces.
+pub fn force(faces: &[GhostFace], gamma: f64, d: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    if faces.is_empty() || gamma == 0.0 {
+        return Vec::new();
+    }
+    let mut f = vec![[0.0; 2]; d.len()];
+    for face in faces {
+        for r in 0..6 {
+            for c in 0..2 {
+                f[face.nodes[r]][c] += gamma * (0..6).map(|k| face.j[r][k] * d[face.nodes[k]][c]).sum::<f64>();
+            }
+        }
+    }
+    f
+}
+
+/// The work the ghost force does over a step with nodal increment `d`,
+/// trapezoidal like the loads' work: `1/2 (f_G^start + f_G^end) . d`.
+/// The grid is reset every step, so the penalty acts on each step's
+/// increment alone and its force at the end of a step (`end`, from
+/// [`force`]) is not carried by the stresses: the next step starts with it
+/// as out-of-balance (`start`, the previous step's `end`). Empty vectors
+/// count as zero.
+pub fn step_work(start: &[[f64; 2]], end: &[[f64; 2]], d: &[[f64; 2]]) -> f64 {
+    let dot = |f: &[[f64; 2]]| f.iter().zip(d).map(|(f, u)| f[0] * u[0] + f[1] * u[1]).sum::<f64>();
+    0.5 * (dot(start) + dot(end))
+}
+
 impl GhostFace {
     /// `gamma (J (x) I_2)` as a row-major 12 x 12 matrix over the face's
     /// nodes `[x0, y0, x1, y1, ...]`.

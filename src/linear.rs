@@ -65,10 +65,15 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let map = &setup.map;
     let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
     let faces = setup.faces.clone();
+    let nodal = nodal_increments(map, &du);
+    let ghost_force = ghost::force(&faces, sim.params.gamma_k, &nodal);
+    let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &nodal);
     drop(setup);
     let active_cells = active.len();
     sim.commit_quasi_static(updated.points, step, updated.work, active, &faces, 1, lambda1 - lambda0);
     sim.state.strain_energy = updated.strain_energy;
+    sim.state.ghost_energy += ghost;
+    sim.state.ghost_force = ghost_force;
     let errors = sim.exact_errors(lambda1);
     timings.total = start.elapsed().as_secs_f64();
     Ok(StepReport {
@@ -86,6 +91,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
             external_work: sim.state.external_work,
             plastic_dissipation: 0.0,
             kinetic: 0.0,
+            ghost: sim.state.ghost_energy,
         },
         condition,
         condition_unstabilised,

@@ -551,8 +551,8 @@ fn dynamics_row(r: &StepReport) -> String {
 
 fn header(first: Option<&StepReport>) -> String {
     let mut h = format!(
-        "{:>5} {:>7} {:>8} {:>5} {:>10} {:>10} {:>18} {:>11} {:>11}",
-        "step", "load", "unknowns", "iters", "residual", "cond(K)", "method", "strain U", "work W"
+        "{:>5} {:>7} {:>8} {:>5} {:>10} {:>10} {:>18} {:>11} {:>11} {:>11}",
+        "step", "load", "unknowns", "iters", "residual", "cond(K)", "method", "strain U", "work W", "ghost G"
     );
     if first.is_some_and(|r| r.condition_unstabilised.is_some()) {
         h.push_str(&format!(" {:>12}", "cond no-ghost"));
@@ -592,7 +592,7 @@ fn row(r: &StepReport) -> String {
         (format!("{:.3e}", c.value), c.method.label())
     });
     let mut s = format!(
-        "{:>5} {:>7.4} {:>8} {:>5} {:>10.3e} {:>10} {:>18} {:>11.4e} {:>11.4e}",
+        "{:>5} {:>7.4} {:>8} {:>5} {:>10.3e} {:>10} {:>18} {:>11.4e} {:>11.4e} {:>11.4e}",
         r.step,
         r.load_factor,
         r.unknowns,
@@ -601,7 +601,8 @@ fn row(r: &StepReport) -> String {
         cond,
         method,
         r.energy.strain,
-        r.energy.external_work
+        r.energy.external_work,
+        r.energy.ghost
     );
     if let Some(c) = r.condition_unstabilised {
         s.push_str(&format!(" {:>12.3e}", c.value));
@@ -827,12 +828,18 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
             .map(|e| format!("{} = {:.4e}", e.name, e.value))
             .collect();
         out!(
-            "summary: {}/{} steps, {:.3} s in steps, final strain energy {:.6e} {en}, work {:.6e} {en}{}{}",
+            "summary: {}/{} steps, {:.3} s in steps, final strain energy {:.6e} {en}, work {:.6e} {en}{}{}{}",
             sim.step_index(),
             sim.load_steps(),
             total_time,
             r.energy.strain,
             r.energy.external_work,
+            // The ghost penalty's share of the work (quasi-static, ghost on).
+            if r.energy.ghost != 0.0 {
+                format!(", ghost penalty {:.6e} {en}", r.energy.ghost)
+            } else {
+                String::new()
+            },
             r.condition.map_or(String::new(), |c| format!(
                 ", {} {:.3e} ({})",
                 // Explicit dynamics conditions the mass it solves with.

@@ -639,11 +639,15 @@ fn increment(
     timings.update = t.elapsed().as_secs_f64();
     // 5. Commit and report.
     let (faces, boundaries) = (setup.faces.clone(), setup.boundaries.clone());
+    let ghost_force = ghost::force(&faces, setup.gamma, &solved.d);
+    let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &solved.d);
     let map = &setup.map;
     let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
     drop(setup);
     let active_cells = active.len();
     let work = updated.work;
+    sim.state.ghost_energy += ghost;
+    sim.state.ghost_force = ghost_force;
     sim.commit_quasi_static(
         updated.points,
         if last { step } else { step - 1 },
@@ -670,6 +674,7 @@ fn increment(
             external_work: sim.state.external_work,
             plastic_dissipation: updated.dissipation,
             kinetic: 0.0,
+            ghost: sim.state.ghost_energy,
         },
         condition,
         condition_unstabilised,

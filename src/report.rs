@@ -80,6 +80,14 @@ pub struct Energy {
     pub plastic_dissipation: f64,
     /// `sum_p 1/2 m_p |v_p|^2` (explicit dynamics; 0 for quasi-static steps).
     pub kinetic: f64,
+    /// Work the ghost stiffness penalty has taken up so far: over each
+    /// step, trapezoidal like the loads' work, `1/2 (f_G^start + f_G^end) . d`
+    /// with `f_G = gamma_K J_G d` ([`crate::ghost::step_work`]). The grid is
+    /// reset every step, so this energy is never given back. Quasi-static
+    /// steps only (0 in explicit dynamics, whose ghost term is a mass); with
+    /// it the balance reads `external_work ~ strain + plastic_dissipation
+    /// + ghost`, up to the trapezoidal rule along the load path.
+    pub ghost: f64,
 }
 
 /// What one successful step did.

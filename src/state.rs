@@ -46,6 +46,14 @@ pub(crate) struct State {
     /// `sum_steps sum_p V_p (s0 + s1)/2 : de` with each step's starting
     /// volumes (the stored energy of the updated small-strain model).
     pub(crate) strain_energy: f64,
+    /// Energy the ghost stiffness penalty has taken up so far
+    /// ([`crate::report::Energy::ghost`]); absent from older checkpoints.
+    #[serde(default)]
+    pub(crate) ghost_energy: f64,
+    /// The ghost force at the end of the last step, per grid node (empty:
+    /// none), which the next step starts with ([`crate::ghost::step_work`]).
+    #[serde(default)]
+    pub(crate) ghost_force: Vec<P2>,
     /// How far each moving implicit boundary has moved.
     pub(crate) ibm_offsets: Vec<P2>,
     /// Explicit dynamics: kinetic plus strain energy at the start (J).
@@ -95,6 +103,8 @@ impl Simulation {
             step: 0,
             external_work: 0.0,
             strain_energy: 0.0,
+            ghost_energy: 0.0,
+            ghost_force: Vec::new(),
             active_cells: map.active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,

@@ -150,6 +150,7 @@ fn csv_holds_every_step_with_units_and_probes() {
     assert_eq!(rows.len(), 1 + 1 + 10, "{rows:?}");
     for h in [
         "strain_energy [N mm/mm]",
+        "ghost_energy [N mm/mm]",
         "residual_norm [N/mm]",
         "probe:tip:uy [mm]",
         "probe:clamp:fy [N/mm]",

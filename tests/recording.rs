@@ -81,6 +81,7 @@ fn recording_holds_grid_points_and_metrics() {
         // Scalars are stored as f64: values come back bit-identical.
         assert_eq!(series["/metrics/energy/strain"][&s], r.energy.strain);
         assert_eq!(series["/metrics/energy/external_work"][&s], r.energy.external_work);
+        assert_eq!(series["/metrics/energy/ghost"][&s], r.energy.ghost);
         assert_eq!(series["/metrics/condition/stiffness"][&s], r.condition.unwrap().value);
         assert_eq!(
             series["/metrics/error/syy_normalised"][&s],
@@ -280,6 +281,7 @@ fn every_entity_family_is_recorded() {
         "/metrics/condition/stiffness_unstabilised",
         "/metrics/energy/strain",
         "/metrics/energy/external_work",
+        "/metrics/energy/ghost",
         "/metrics/newton/iterations",
         "/metrics/time/total",
         "/metrics/unknowns",

@@ -426,3 +426,119 @@ fn a_target_search_predicts_and_meets_the_error() {
     assert_eq!(code, 2, "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The `<text>` labels of an SVG with their boxes `[x0, y0, x1, y1]`:
+/// from the position, the anchor and the font size (the picture's 12 px
+/// unless the label sets its own), 0.6 em a character
+/// (`svg::text_width`), from 0.8 em above the baseline to 0.2 em below.
+fn label_boxes(svg: &str) -> Vec<(String, [f64; 4])> {
+    let attr = |tag: &str, name: &str| -> Option<String> {
+        let at = tag.find(&format!(" {name}=\""))? + name.len() + 3;
+        Some(tag[at..].split('"').next()?.to_string())
+    };
+    svg.split("<text")
+        .skip(1)
+        .map(|t| {
+            let (tag, rest) = t.split_once('>').unwrap();
+            let text = rest.split("</text>").next().unwrap();
+            let text = text
+                .replace("&lt;", "<")
+                .replace("&gt;", ">")
+                .replace("&quot;", "\"")
+                .replace("&amp;", "&");
+            let num = |n: &str| attr(tag, n).map(|v| v.parse::<f64>().unwrap());
+            let (x, y, size) = (num("x").unwrap(), num("y").unwrap(), num("font-size").unwrap_or(12.0));
+            let w = mpmlab::sweep::svg::text_width(&text, size);
+            let x0 = match attr(tag, "text-anchor").as_deref() {
+                Some("middle") => x - w / 2.0,
+                Some("end") => x - w,
+                _ => x,
+            };
+            (text, [x0, y - 0.8 * size, x0 + w, y + 0.2 * size])
+        })
+        .collect()
+}
+
+/// The stability map's labels do not overlap one another and stay inside
+/// the picture, and each run has a cell of its own (none hides another):
+/// G Table 5's beam settings with failures side by side, and one long
+/// setting (delta/h) whose values and failures sit next to each other.
+#[test]
+fn stability_map_labels_do_not_overlap_and_every_run_shows() {
+    let run = |settings: &[(&str, &str)], fails: usize| RunResult {
+        id: settings
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect::<Vec<_>>()
+            .join("_"),
+        settings: settings.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect(),
+        completed: fails == 0,
+        failed_step: fails,
+        failure: if fails > 0 {
+            format!("step {fails} failed: residual above tolerance")
+        } else {
+            String::new()
+        },
+        ..Default::default()
+    };
+    let mut beam = Vec::new();
+    for h in ["0.5", "0.25", "0.125"] {
+        for ppc in ["2", "3", "4", "5", "6"] {
+            for (k, g) in ["12e6", "1e2", "0"].into_iter().enumerate() {
+                beam.push(run(
+                    &[("h", h), ("ppc", ppc), ("gamma_k", g)],
+                    if k == 0 { 0 } else { 13 },
+                ));
+            }
+        }
+    }
+    let delta: Vec<RunResult> = ["1e-2", "1e-4", "1e-6", "1e-8", "1e-10", "1e-12"]
+        .iter()
+        .enumerate()
+        .map(|(k, d)| run(&[("delta_over_h", d)], if k > 2 { 1 } else { 0 }))
+        .collect();
+    for (name, results) in [("beam-stability", beam), ("delta", delta)] {
+        let svg = mpmlab::sweep::svg::stability_map(&format!("{name}: which runs complete"), &results);
+        let size = |n: &str| -> f64 {
+            let at = svg.find(&format!(" {n}=\"")).unwrap() + n.len() + 3;
+            svg[at..].split('"').next().unwrap().parse().unwrap()
+        };
+        let (w, h) = (size("width"), size("height"));
+        let boxes = label_boxes(&svg);
+        assert!(boxes.len() > results.len(), "{name}: {svg}");
+        for (k, (a, p)) in boxes.iter().enumerate() {
+            assert!(
+                p[0] >= 0.0 && p[2] <= w && p[1] >= 0.0 && p[3] <= h,
+                "{name}: `{a}` {p:?} outside {w} x {h}"
+            );
+            for (b, q) in &boxes[k + 1..] {
+                let apart = p[2] <= q[0] || q[2] <= p[0] || p[3] <= q[1] || q[3] <= p[1];
+                assert!(apart, "{name}: `{a}` {p:?} overlaps `{b}` {q:?}");
+            }
+        }
+        // One cell per run, failed ones marked.
+        let failed = results.iter().filter(|r| !r.completed).count();
+        assert_eq!(count(&svg, r#"data-completed="false""#), failed, "{name}");
+        let mut cells: Vec<(String, String)> = svg
+            .split(r#"<g class="run""#)
+            .skip(1)
+            .map(|g| {
+                let rect = g.split("<rect").nth(1).unwrap();
+                let v = |n: &str| {
+                    rect.split(&format!(" {n}=\""))
+                        .nth(1)
+                        .unwrap()
+                        .split('"')
+                        .next()
+                        .unwrap()
+                        .to_string()
+                };
+                (v("x"), v("y"))
+            })
+            .collect();
+        assert_eq!(cells.len(), results.len());
+        cells.sort();
+        cells.dedup();
+        assert_eq!(cells.len(), results.len(), "{name}: runs share a cell");
+    }
+}

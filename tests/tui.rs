@@ -212,6 +212,7 @@ fn sweep_view_shows_runs_and_charts() {
             run(0.125, f64::NAN, 1e-2, false),
         ],
         scroll: 0,
+        show_legend: true,
     };
     let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
     t.draw(|f| draw_sweep(f, &view)).unwrap();
@@ -249,6 +250,7 @@ fn sweep_view_shows_runs_and_charts() {
         title: "demo".into(),
         results: vec![probed(1.0), probed(0.5), probed(0.25), probed(0.125)],
         scroll: 0,
+        show_legend: true,
     };
     for (w, hgt) in [(100, 30), (160, 48)] {
         let mut t = Terminal::new(TestBackend::new(w, hgt)).unwrap();
@@ -288,6 +290,7 @@ fn sweep_view_shows_runs_and_charts() {
         title: "delta".into(),
         results: vec![run(1e-1), run(1e-2), run(1e-3)],
         scroll: 0,
+        show_legend: true,
     };
     let mut t = Terminal::new(TestBackend::new(160, 48)).unwrap();
     t.draw(|f| draw_sweep(f, &view)).unwrap();
@@ -701,5 +704,351 @@ fn canvas_shows_names_supports_loads_and_a_colour_bar() {
         // One step: the condition number is a dot on the chart.
         let all = rows.join("\n");
         assert!(all.contains("condition number per step") && all.contains('•'), "{all}");
+    }
+}
+
+/// Whether a cell holds what a chart's curves draw.
+fn plotted(symbol: &str) -> bool {
+    symbol
+        .chars()
+        .any(|c| ('\u{2801}'..='\u{28ff}').contains(&c) || c == '•')
+}
+
+/// The legends of the charts hide no curve: the beam's condition numbers
+/// (with ghost low, without it rising to 1e26 and back) cross the top left
+/// of the plot, where the legend used to be; now it sits where no curve
+/// passes (160x48: top right) or, when every place would hide some, in
+/// the chart's bottom border (100x30). Read from the buffer: the cells the
+/// legend changes (against the same screen with `L`, legends off) hold no
+/// curve.
+#[test]
+fn chart_legends_hide_no_curve_at_two_sizes() {
+    let mut sim = sim_with("elastic-beam-ghost", |_| {});
+    let mut app = App::new(&sim, None);
+    for _ in 0..6 {
+        let r = sim.step().unwrap();
+        app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    }
+    app.apply(Action::NextChart);
+    assert_eq!(app.chart, mpmlab::tui::app::ChartKind::Condition);
+    let buffer = |app: &App, w: u16, h: u16| {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw(f, app)).unwrap();
+        t.backend().buffer().clone()
+    };
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let shown = buffer(&app, w, h);
+        app.apply(Action::ToggleLegend);
+        let hidden = buffer(&app, w, h);
+        app.apply(Action::ToggleLegend);
+        let rows = screen_at(&app, w, h);
+        let all = rows.join("\n");
+        let top = rows
+            .iter()
+            .position(|l| l.contains("condition number per step"))
+            .unwrap() as u16;
+        let left = w / 2;
+        let bottom = (top + 1..h).find(|&y| shown[(left, y)].symbol() == "└").unwrap();
+        let text = |b: &ratatui::buffer::Buffer| -> String {
+            (top..=bottom)
+                .map(|y| (left..w).map(|x| b[(x, y)].symbol().to_string()).collect::<String>())
+                .collect::<Vec<_>>()
+                .join("\n")
+        };
+        assert!(text(&shown).contains("without ghost"), "{w}x{h}\n{all}");
+        assert!(!text(&hidden).contains("without ghost"), "{w}x{h}\n{}", text(&hidden));
+        let mut changed = 0;
+        for y in top + 1..bottom {
+            for x in left + 1..w - 1 {
+                if shown[(x, y)].symbol() != hidden[(x, y)].symbol() {
+                    changed += 1;
+                    assert!(
+                        !plotted(hidden[(x, y)].symbol()),
+                        "{w}x{h}: the legend hides a curve at ({x}, {y})\n{all}\n{}",
+                        text(&hidden)
+                    );
+                }
+            }
+        }
+        println!("{w}x{h}: the legend changes {changed} cells of the plot");
+        // The old place, the plot's top left (a box 15 x 4 for `with
+        // ghost`, `without ghost`): curves pass there.
+        let axis = (left + 1..w).find(|&x| hidden[(x, top + 1)].symbol() == "│").unwrap();
+        let under_old = (top + 1..top + 5)
+            .flat_map(|y| (axis + 1..axis + 16).map(move |x| (x, y)))
+            .filter(|&(x, y)| plotted(hidden[(x, y)].symbol()))
+            .count();
+        assert!(under_old > 0, "{w}x{h}\n{}", text(&hidden));
+    }
+}
+
+/// Nothing cut mid-word at either size: the errors against the exact
+/// solution (each name with its value on one line), the charts' titles,
+/// and both columns of the redo panel (a failed step's message and its
+/// residuals, wrapped between words).
+#[test]
+fn errors_titles_and_redo_panel_are_whole_words_at_two_sizes() {
+    let tokens = |rows: &[String]| -> std::collections::HashSet<String> {
+        rows.iter()
+            .flat_map(|r| {
+                r.chars()
+                    .map(|c| if "│┌┐└┘─├┤".contains(c) { ' ' } else { c })
+                    .collect::<String>()
+                    .split_whitespace()
+                    .map(str::to_string)
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    // The plate with a hole: four error measures.
+    let mut sim = sim_with("plate-hole-neumann", |_| {});
+    let mut app = App::new(&sim, None);
+    let r = sim.step().unwrap();
+    app.update(Update::Stepped(
+        Box::new(r.clone()),
+        Box::new(View::of(&sim, app.view.field)),
+    ));
+    assert_eq!(r.errors.len(), 4);
+    let words = [
+        "residual",
+        "per",
+        "iteration",
+        "(log10;",
+        "v:",
+        "next",
+        "chart)",
+        "condition",
+        "number",
+        "step",
+        "(log10)",
+        "(v:",
+        "energy",
+        "(J/m)",
+        "errors",
+        "—",
+        "nothing",
+        "yet",
+    ];
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        for _ in 0..4 {
+            let rows = screen_at(&app, w, h);
+            let all = rows.join("\n");
+            for e in &r.errors {
+                let pair = format!("{}\u{a0}{:.3e}", e.name, e.value);
+                assert!(all.contains(&pair), "{w}x{h}: {pair}\n{all}");
+            }
+            // The chart's title: whole words only.
+            let row = rows.iter().find(|l| l.contains(" per ")).unwrap();
+            let title: String = row.chars().skip(w as usize / 2).collect();
+            let title = title.trim_matches(|c| "┌┐─ ".contains(c));
+            for t in title.split_whitespace() {
+                assert!(words.contains(&t), "{w}x{h}: `{t}` in `{title}`");
+            }
+            // Its bottom border (a legend there): whole names, then how
+            // many did not fit.
+            let top = rows.iter().position(|l| l.contains(" per ")).unwrap();
+            let border = rows[top + 1..]
+                .iter()
+                .find(|l| l.chars().nth(w as usize / 2) == Some('└'))
+                .unwrap();
+            let border: String = border.chars().skip(w as usize / 2).collect();
+            for t in border.trim_matches(|c| "└┘─ ".contains(c)).split_whitespace() {
+                let known = t == "■"
+                    || r.errors.iter().any(|e| e.name == t)
+                    || ["strain", "external", "work", "plastic", "K"].contains(&t)
+                    || t.strip_prefix('+').is_some_and(|n| n.parse::<usize>().is_ok());
+                assert!(known, "{w}x{h}: `{t}` in `{border}`");
+            }
+            app.apply(Action::NextChart);
+        }
+        app.apply(Action::NextChart);
+    }
+    // The redo panel: a failed step (its message lists eleven residuals)
+    // against the step redone with ghost.
+    let mut sim = sim_with("elastic-beam-ghost", |s| {
+        s.grid.h = 0.25;
+        s.analysis.gamma_k = 0.0;
+    });
+    let mut app = App::new(&sim, None);
+    let (snapshot, failure) = loop {
+        let snap = sim.snapshot();
+        match sim.step() {
+            Ok(r) => app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field)))),
+            Err(f) => break (snap, f),
+        }
+    };
+    app.update(Update::Failed(failure.clone()));
+    app.apply(Action::RaiseGammaK);
+    assert_eq!(app.apply(Action::Redo), Some(Command::Redo));
+    sim.restore(&snapshot);
+    let mut p = sim.params().clone();
+    p.gamma_k = 12.0e6;
+    sim.set_params(p);
+    let after = sim.step().unwrap();
+    let expected: Vec<String> = failure
+        .to_string()
+        .split_whitespace()
+        .map(str::to_string)
+        .chain(failure.residuals().iter().map(|x| format!("{x:.1e}")))
+        .chain(after.residuals.iter().map(|x| format!("{x:.1e}")))
+        .collect();
+    app.update(Update::Redone(
+        Box::new((Err(failure), Ok(after))),
+        Box::new(View::of(&sim, app.view.field)),
+    ));
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let rows = screen_at(&app, w, h);
+        let have = tokens(&rows);
+        for t in &expected {
+            assert!(have.contains(t), "{w}x{h}: `{t}` is not whole\n{}", rows.join("\n"));
+        }
+    }
+}
+
+/// The sweep view's stability map hides no failed run: G Table 5's 15
+/// rows of settings do not fit at 100x30; the rows with failures are kept
+/// (the last two here), and a line counts the completed rows left out.
+#[test]
+fn sweep_stability_map_shows_every_failure_at_two_sizes() {
+    use mpmlab::sweep::RunResult;
+    use mpmlab::tui::sweep::{draw as draw_sweep, SweepView};
+    let mut results = Vec::new();
+    for h in ["0.5", "0.25", "0.125"] {
+        for ppc in ["2", "3", "4", "5", "6"] {
+            for g in ["12e6", "0"] {
+                let fails =
+                    g == "0" && (h, ppc) != ("0.125", "2") && (h == "0.125" && ppc >= "5" || h == "0.5" && ppc == "2");
+                results.push(RunResult {
+                    id: format!("h={h}_ppc={ppc}_gamma_k={g}"),
+                    settings: vec![
+                        ("h".into(), h.into()),
+                        ("ppc".into(), ppc.into()),
+                        ("gamma_k".into(), g.into()),
+                    ],
+                    completed: !fails,
+                    failed_step: if fails { 13 } else { 0 },
+                    wall_s: 1.0,
+                    ..Default::default()
+                });
+            }
+        }
+    }
+    let failed = results.iter().filter(|r| !r.completed).count();
+    assert_eq!(failed, 3);
+    let view = SweepView {
+        title: "beam-stability".into(),
+        results,
+        scroll: 0,
+        show_legend: true,
+    };
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw_sweep(f, &view)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let rows: Vec<String> = (0..h)
+            .map(|y| (0..w / 2).map(|x| buf[(x, y)].symbol().to_string()).collect())
+            .collect();
+        let top = rows.iter().position(|l| l.contains("stability map")).unwrap();
+        let map = rows[top..].join("\n");
+        assert!(
+            map.contains(&format!("stability map ({failed} failed)")),
+            "{w}x{h}\n{map}"
+        );
+        assert_eq!(map.matches("FAIL").count(), failed, "{w}x{h}\n{map}");
+        assert!(map.contains("h=0.125 ppc=6"), "{w}x{h}\n{map}");
+        if w == 100 {
+            assert!(map.contains("more rows, all ok"), "{w}x{h}\n{map}");
+        }
+    }
+}
+
+/// The sweep view's charts place their legends as the main screen does:
+/// error against h falls to the bottom left, so the old place, the top
+/// right, covered the curve; the cells the legend changes (against `L`,
+/// legends off) hold no curve, at both sizes.
+#[test]
+fn sweep_chart_legends_hide_no_curve_at_two_sizes() {
+    use mpmlab::sweep::RunResult;
+    use mpmlab::tui::sweep::{draw as draw_sweep, SweepView};
+    let run = |h: f64, e: f64, t: f64| RunResult {
+        id: format!("h={h}"),
+        settings: vec![("h".into(), h.to_string())],
+        completed: true,
+        wall_s: t,
+        errors: vec![("displacement_l2".into(), e)],
+        condition: f64::NAN,
+        ..Default::default()
+    };
+    let mut view = SweepView {
+        title: "demo".into(),
+        results: vec![
+            run(1.0, 1e-1, 1e-3),
+            run(0.5, 5e-2, 4e-3),
+            run(0.25, 2.5e-2, 1.6e-2),
+            run(0.125, 1.25e-2, 6.4e-2),
+        ],
+        scroll: 0,
+        show_legend: true,
+    };
+    let buffer = |v: &SweepView, w: u16, h: u16| {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| draw_sweep(f, v)).unwrap();
+        t.backend().buffer().clone()
+    };
+    for (w, h) in [(100u16, 30u16), (160, 48)] {
+        let shown = buffer(&view, w, h);
+        view.show_legend = false;
+        let hidden = buffer(&view, w, h);
+        view.show_legend = true;
+        let row = |b: &ratatui::buffer::Buffer, y: u16| -> String {
+            (w / 2..w).map(|x| b[(x, y)].symbol().to_string()).collect()
+        };
+        // Both titles in whole words (the long one shortened at 100x30).
+        for y in (0..h).filter(|&y| row(&shown, y).contains("displacement_l2 ")) {
+            let title = row(&shown, y);
+            let title = title.trim_matches(|c| "┌┐─ ".contains(c));
+            for t in title.split_whitespace() {
+                let whole = [
+                    "displacement_l2",
+                    "against",
+                    "wall",
+                    "time",
+                    "(log-log)",
+                    "(lines)",
+                    "and",
+                    "cond(K)",
+                    "(dots)",
+                    "h",
+                    "…",
+                ];
+                assert!(whole.contains(&t), "{w}x{h}: `{t}` in `{title}`");
+            }
+        }
+        let top = (0..h)
+            .find(|&y| row(&shown, y).contains("(lines) and cond(K)"))
+            .unwrap_or_else(|| panic!("{}", (0..h).map(|y| row(&shown, y)).collect::<Vec<_>>().join("\n")));
+        let bottom = (top + 1..h).find(|&y| shown[(w / 2, y)].symbol() == "└").unwrap();
+        let text = |b: &ratatui::buffer::Buffer| (top..=bottom).map(|y| row(b, y)).collect::<Vec<_>>().join("\n");
+        assert!(text(&shown).contains("rate 1.00"), "{w}x{h}\n{}", text(&shown));
+        assert!(!text(&hidden).contains("rate 1.00"), "{w}x{h}\n{}", text(&hidden));
+        for y in top + 1..bottom {
+            for x in w / 2 + 1..w - 1 {
+                if shown[(x, y)].symbol() != hidden[(x, y)].symbol() {
+                    assert!(
+                        !plotted(hidden[(x, y)].symbol()),
+                        "{w}x{h}: the legend hides a curve at ({x}, {y})\n{}\n{}",
+                        text(&shown),
+                        text(&hidden)
+                    );
+                }
+            }
+        }
+        // The old place, the plot's top right (a box of at least 11 x 3
+        // for `rate 1.00`): the curve ends there.
+        let under_old = (top + 1..top + 4)
+            .flat_map(|y| (w - 12..w - 1).map(move |x| (x, y)))
+            .filter(|&(x, y)| plotted(hidden[(x, y)].symbol()))
+            .count();
+        assert!(under_old > 0, "{w}x{h}\n{}", text(&hidden));
     }
 }

@@ -167,6 +167,7 @@ impl Contents {
             s.push(Series::new(e("strain"), "strain", ORANGE));
             s.push(Series::new(e("external_work"), "external work", GREEN));
             s.push(Series::new(e("plastic_dissipation"), "plastic", VERMILLION));
+            s.push(Series::new(e("ghost"), "ghost penalty", SKY));
             s.push(Series::new(
                 e("balance_error"),
                 "strain + plastic - external work",
@@ -285,6 +286,7 @@ impl Contents {
                         "/metrics/energy/strain",
                         "/metrics/energy/external_work",
                         "/metrics/energy/plastic_dissipation",
+                        "/metrics/energy/ghost",
                         "/metrics/energy/balance_error",
                     ])
                     .into(),

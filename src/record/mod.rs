@@ -30,6 +30,7 @@
 //! | `metrics/condition/stiffness` | Scalars | every step |
 //! | `metrics/log10/residual`, `metrics/log10/condition/stiffness` | Scalars | as above |
 //! | `metrics/energy/strain`, `metrics/energy/external_work` | Scalars | every step |
+//! | `metrics/energy/ghost` | Scalars (quasi-static: the work the ghost stiffness penalty took up so far, [`crate::report::Energy::ghost`]) | every step |
 //! | `metrics/energy/balance_error` | Scalars (quasi-static: strain + plastic - external work) | every step |
 //! | `metrics/error/<measure>`, `metrics/log10/error/<measure>` | Scalars | every step with an exact solution |
 //! | `metrics/probe/<name>/{ux,uy,sxx,syy,sxy,fx,fy}` | Scalars (the scene's `[[probe]]`s, [`crate::probe`]) | every step |
@@ -870,6 +871,7 @@ impl Recorder {
         self.scalar("metrics/energy/strain", report.energy.strain)?;
         self.scalar("metrics/energy/external_work", report.energy.external_work)?;
         if report.dynamics.is_none() {
+            self.scalar("metrics/energy/ghost", report.energy.ghost)?;
             // The quasi-static balance, the dynamic one without kinetic
             // energy: stored and dissipated against the work done (0 up to
             // the trapezoidal rule of the work along the load path).

@@ -194,8 +194,18 @@ pub fn chart(title: &str, x_label: &str, y_label: &str, series: &[Series], log_x
     s
 }
 
+/// The width a label of `text` takes at `font_size` px, estimated at 0.6 em
+/// a character (sans-serif glyphs average about 0.5-0.6 em): what the
+/// stability map's layout and its test use.
+pub fn text_width(text: &str, font_size: f64) -> f64 {
+    0.6 * font_size * text.chars().count() as f64
+}
+
 /// Which runs completed: rows are the settings but the last, columns the
 /// last setting's values; green completed, red failed (with its step).
+/// Columns are as wide as their widest label (header or cell), the row
+/// labels' margin as wide as the widest row label, and the picture as
+/// wide as its title, so no two labels overlap.
 pub fn stability_map(title: &str, results: &[RunResult]) -> String {
     let key = |r: &RunResult| -> (String, String) {
         let n = r.settings.len();
@@ -217,9 +227,22 @@ pub fn stability_map(title: &str, results: &[RunResult]) -> String {
             cols.push(b);
         }
     }
-    let (cw, rh, left, top) = (110.0, 26.0, 220.0, 60.0);
+    let outcome = |r: &RunResult| -> (&'static str, String) {
+        if r.completed {
+            ("#2a9d45", "completed".to_string())
+        } else if r.failed_step > 0 {
+            ("#d1495b", format!("fails at step {}", r.failed_step))
+        } else {
+            ("#888888", "invalid".to_string())
+        }
+    };
+    const FONT: f64 = 12.0;
+    let widest = |labels: &mut dyn Iterator<Item = String>| labels.map(|l| text_width(&l, FONT)).fold(0.0, f64::max);
+    let cw = widest(&mut cols.iter().cloned().chain(results.iter().map(|r| outcome(r).1))).max(98.0) + 12.0;
+    let left = widest(&mut rows.iter().cloned()).max(92.0) + 28.0;
+    let (rh, top) = (26.0, 60.0);
     let (w, h) = (
-        left + cw * cols.len() as f64 + 20.0,
+        (left + cw * cols.len() as f64 + 20.0).max(text_width(title, 15.0) + 20.0),
         top + rh * rows.len() as f64 + 20.0,
     );
     let mut s = String::new();
@@ -252,13 +275,7 @@ pub fn stability_map(title: &str, results: &[RunResult]) -> String {
             rows.iter().position(|x| *x == a).unwrap_or(0),
             cols.iter().position(|x| *x == b).unwrap_or(0),
         );
-        let (fill, label) = if r.completed {
-            ("#2a9d45", "completed".to_string())
-        } else if r.failed_step > 0 {
-            ("#d1495b", format!("fails at step {}", r.failed_step))
-        } else {
-            ("#888888", "invalid".to_string())
-        };
+        let (fill, label) = outcome(r);
         let _ = write!(
             s,
             r#"<g class="run" data-id="{}" data-completed="{}"><rect x="{}" y="{}" width="{}" height="{}" fill="{fill}" stroke="white"><title>{}</title></rect><text x="{}" y="{}" text-anchor="middle" fill="white">{label}</text></g>"#,

@@ -176,6 +176,8 @@ pub enum Action {
     ToggleGrid,
     ToggleActive,
     ToggleGhostFaces,
+    /// Show or hide the charts' legends.
+    ToggleLegend,
     /// Redo the last step (done or failed) from its snapshot with the
     /// current parameters, and compare.
     Redo,
@@ -297,6 +299,8 @@ pub struct App {
     pub show_grid: bool,
     pub show_active: bool,
     pub show_ghost_faces: bool,
+    /// The charts' legends (placed where they hide no curve).
+    pub show_legend: bool,
     /// The probes at the start (the probe chart's first point).
     pub probes_start: Vec<crate::probe::ProbeValue>,
     /// The probe chart's axes: indices into [`App::probe_columns`].
@@ -348,6 +352,7 @@ impl App {
             show_grid: true,
             show_active: false,
             show_ghost_faces: true,
+            show_legend: true,
             probes_start: Vec::new(),
             probe_x: 0,
             probe_y: 0,
@@ -644,6 +649,10 @@ impl App {
             }
             Action::ToggleGhostFaces => {
                 self.show_ghost_faces = !self.show_ghost_faces;
+                None
+            }
+            Action::ToggleLegend => {
+                self.show_legend = !self.show_legend;
                 None
             }
             Action::NextChart => {

@@ -128,6 +128,36 @@ fn remedies(f: &StepFailure) -> &'static [&'static str] {
     }
 }
 
+/// `text` in lines of at most `width` characters, broken between words (a
+/// word longer than a line is broken where the line ends).
+fn wrap_words(text: &str, width: usize) -> Vec<String> {
+    let width = width.max(1);
+    let mut out: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        let mut word: Vec<char> = word.chars().collect();
+        while word.len() > width {
+            if !line.is_empty() {
+                out.push(std::mem::take(&mut line));
+            }
+            out.push(word.drain(..width).collect());
+        }
+        let word: String = word.into_iter().collect();
+        let n = line.chars().count();
+        if n > 0 && n + 1 + word.chars().count() > width {
+            out.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(&word);
+    }
+    if !line.is_empty() || out.is_empty() {
+        out.push(line);
+    }
+    out
+}
+
 /// The failure panel: why, the residual history and what to try.
 fn draw_failure(frame: &mut Frame, area: Rect, f: &StepFailure) {
     let r = centred(frame, area, 86, 16);
@@ -158,7 +188,10 @@ fn draw_failure(frame: &mut Frame, area: Rect, f: &StepFailure) {
 
 /// Before and after a redo, side by side.
 fn draw_redo(frame: &mut Frame, area: Rect, outcomes: &(super::app::Outcome, super::app::Outcome)) {
-    let r = centred(frame, area, 90, 14);
+    // As wide as the terminal allows (up to 140 columns), each column's
+    // lines wrapped between words to its width.
+    let w = area.width.saturating_sub(4).clamp(40, 140);
+    let col = (w.saturating_sub(3) / 2) as usize;
     let describe = |o: &super::app::Outcome| -> Vec<String> {
         match o {
             Ok(r) => {
@@ -193,14 +226,22 @@ fn draw_redo(frame: &mut Frame, area: Rect, outcomes: &(super::app::Outcome, sup
         }
     };
     let (a, b) = (describe(&outcomes.0), describe(&outcomes.1));
-    let rows = (0..a.len().max(b.len())).map(|k| {
-        Row::new([
-            Cell::from(a.get(k).cloned().unwrap_or_default()),
-            Cell::from(b.get(k).cloned().unwrap_or_default()),
-        ])
+    let cells: Vec<(Vec<String>, Vec<String>)> = (0..a.len().max(b.len()))
+        .map(|k| {
+            (
+                wrap_words(a.get(k).map_or("", |s| s.as_str()), col),
+                wrap_words(b.get(k).map_or("", |s| s.as_str()), col),
+            )
+        })
+        .collect();
+    let h = cells.iter().map(|(x, y)| x.len().max(y.len()) as u16).sum::<u16>() + 4;
+    let rows = cells.into_iter().map(|(x, y)| {
+        let height = x.len().max(y.len()) as u16;
+        Row::new([Cell::from(x.join("\n")), Cell::from(y.join("\n"))]).height(height)
     });
+    let r = centred(frame, area, w, h.max(14));
     frame.render_widget(
-        Table::new(rows, [Constraint::Percentage(50), Constraint::Percentage(50)])
+        Table::new(rows, [Constraint::Length(col as u16), Constraint::Length(col as u16)])
             .header(Row::new(["before", "after (current parameters)"]).style(Style::new().add_modifier(Modifier::BOLD)))
             .block(
                 Block::default()
@@ -545,10 +586,186 @@ fn framed<'a>(
         .y_axis(Axis::default().bounds(y.0).labels(y.1))
 }
 
+/// An axis: its bounds and its two end labels.
+pub(crate) type AxisEnds = ([f64; 2], [String; 2]);
+
+/// A named, coloured series of a chart with a legend: name, colour, data,
+/// and whether its points are joined by lines (else scattered).
+pub(crate) type Named<'a> = (&'a str, Color, &'a [(f64, f64)], bool);
+
+/// A chart of named series whose legend hides none of their curves: in
+/// the corner (or edge) of the plot where the curves cross no cell under
+/// the legend's box; when every place would hide some, the names go into
+/// the chart's bottom border instead, in their colours. Without `show`,
+/// no legend.
+fn with_legend<'a>(
+    series: &[Named<'a>],
+    title: String,
+    x: ([f64; 2], [String; 2]),
+    y: ([f64; 2], [String; 2]),
+    area: Rect,
+    show: bool,
+) -> ratatui::widgets::Chart<'a> {
+    use ratatui::widgets::{Axis, Chart, Dataset};
+    let datasets: Vec<Dataset<'a>> = series.iter().map(|(n, c, d, _)| line(n, *c, d)).collect();
+    let chart = Chart::new(datasets)
+        .x_axis(Axis::default().bounds(x.0).labels(x.1.clone()))
+        .y_axis(Axis::default().bounds(y.0).labels(y.1.clone()));
+    place_legend(
+        chart,
+        Block::default().borders(Borders::ALL).title(title),
+        series,
+        (&x, &y),
+        area,
+        show,
+    )
+}
+
+/// Give `chart` its `block` and a legend of `series` that hides none of
+/// their curves ([`legend_place`]): in the plot, or as coloured names in
+/// the block's bottom border; none without `show`. `axes` are the chart's
+/// bounds and end labels.
+pub(crate) fn place_legend<'a>(
+    chart: ratatui::widgets::Chart<'a>,
+    mut block: Block<'a>,
+    series: &[Named],
+    axes: (&AxisEnds, &AxisEnds),
+    area: Rect,
+    show: bool,
+) -> ratatui::widgets::Chart<'a> {
+    let placement = if show {
+        legend_place(series, axes.0, axes.1, area)
+    } else {
+        None
+    };
+    let position = match placement {
+        Some(Ok(p)) => Some(p),
+        Some(Err(())) => {
+            // Whole names only: those that fit in the border, then how
+            // many are left out (L hides the legend to see the chart).
+            let named: Vec<&Named> = series.iter().filter(|s| !s.0.is_empty() && !s.2.is_empty()).collect();
+            let room = area.width.saturating_sub(4) as usize;
+            let items: Vec<String> = named.iter().map(|s| format!("■ {} ", s.0)).collect();
+            let all_fit = items.iter().map(|i| i.chars().count()).sum::<usize>() < room;
+            let mut spans = vec![Span::raw(" ")];
+            let mut used = 1;
+            for (k, (item, (_, color, _, _))) in items.into_iter().zip(&named).enumerate() {
+                let rest = named.len() - k - 1;
+                let tail = if all_fit || rest == 0 {
+                    0
+                } else {
+                    format!("+{rest} ").len()
+                };
+                if used + item.chars().count() + tail > room {
+                    spans.push(Span::raw(format!("+{} ", named.len() - k)));
+                    break;
+                }
+                used += item.chars().count();
+                spans.push(Span::styled(item, Style::new().fg(*color)));
+            }
+            block = block.title_bottom(Line::from(spans));
+            None
+        }
+        None => None,
+    };
+    chart
+        .block(block)
+        .legend_position(position)
+        .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1)))
+}
+
+/// Where a legend of `series` hides no curve: `Ok(position)` (the first
+/// of the corners, then the edges, whose box covers no cell the curves
+/// pass through), `Err(())` when every place would hide some or the box
+/// does not fit, `None` when there is nothing to name. The plot's cells
+/// follow ratatui's chart layout for a bordered chart with end labels on
+/// both axes and no axis titles.
+pub(crate) fn legend_place(
+    series: &[Named],
+    x: &AxisEnds,
+    y: &AxisEnds,
+    area: Rect,
+) -> Option<Result<ratatui::widgets::LegendPosition, ()>> {
+    use ratatui::widgets::LegendPosition as P;
+    // Every named series has a line in ratatui's legend, even without data.
+    let named: Vec<&Named> = series.iter().filter(|s| !s.0.is_empty()).collect();
+    let width = named.iter().map(|s| s.0.chars().count()).max()? as u16 + 2;
+    let height = named.len() as u16 + 2;
+    // The chart's inner area, less the x labels and axis (two rows) and
+    // the y labels and axis on the left.
+    let inner = Rect::new(
+        area.x + 1,
+        area.y + 1,
+        area.width.saturating_sub(2),
+        area.height.saturating_sub(2),
+    );
+    let left = y.1.iter().map(|l| l.chars().count()).max().unwrap_or(0);
+    let left = left.max(x.1[0].chars().count().saturating_sub(1)) as u16;
+    let left = left.min(inner.width / 3) + 1;
+    let (gw, gh) = (inner.width.saturating_sub(left), inner.height.saturating_sub(2));
+    if gw < width || gh < height {
+        return Some(Err(()));
+    }
+    // The cells each curve passes through, as ratatui's canvas maps data
+    // to braille dots (2 x 4 a cell; a lone value is a dot of a cell).
+    let (gwu, ghu) = (gw as usize, gh as usize);
+    let mut covered = vec![false; gwu * ghu];
+    let (xb, yb) = (x.0, y.0);
+    // `p` on a grid of `nx x ny` dots, rounded as ratatui does.
+    let at = |p: (f64, f64), nx: usize, ny: usize| -> Option<(f64, f64)> {
+        let fx = (p.0 - xb[0]) / (xb[1] - xb[0]);
+        let fy = (yb[1] - p.1) / (yb[1] - yb[0]);
+        ((0.0..=1.0).contains(&fx) && (0.0..=1.0).contains(&fy)).then(|| (fx * (nx - 1) as f64, fy * (ny - 1) as f64))
+    };
+    let mut mark = |d: (f64, f64), per: (usize, usize)| {
+        let (i, j) = (d.0.round() as usize / per.0, d.1.round() as usize / per.1);
+        covered[j.min(ghu - 1) * gwu + i.min(gwu - 1)] = true;
+    };
+    for s in &named {
+        let pts: Vec<(f64, f64)> =
+            s.2.iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
+        for p in &pts {
+            if let Some(d) = at(*p, gwu, ghu) {
+                mark(d, (1, 1));
+            }
+            if let Some(d) = at(*p, 2 * gwu, 4 * ghu) {
+                mark(d, (2, 4));
+            }
+        }
+        for w in pts.windows(2).filter(|_| s.3) {
+            let (Some(a), Some(b)) = (at(w[0], 2 * gwu, 4 * ghu), at(w[1], 2 * gwu, 4 * ghu)) else {
+                continue;
+            };
+            let n = (2.0 * (b.0 - a.0).abs().max((b.1 - a.1).abs())).ceil() as usize + 1;
+            for k in 0..=n {
+                let t = k as f64 / n as f64;
+                mark((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)), (2, 4));
+            }
+        }
+    }
+    let (mx, my) = (gw - width, gh - height);
+    let places = [
+        (P::TopRight, mx, 0),
+        (P::TopLeft, 0, 0),
+        (P::BottomRight, mx, my),
+        (P::BottomLeft, 0, my),
+        (P::Right, mx, my / 2),
+        (P::Left, 0, my / 2),
+        (P::Top, mx / 2, 0),
+        (P::Bottom, mx / 2, my),
+    ];
+    let free = |x0: u16, y0: u16| {
+        (y0..y0 + height).all(|j| (x0..x0 + width).all(|i| !covered[j as usize * gw as usize + i as usize]))
+    };
+    Some(places.iter().find(|(_, x0, y0)| free(*x0, *y0)).map(|p| p.0).ok_or(()))
+}
+
 /// Per-step series: condition numbers (log10, with and without ghost),
 /// energies (strain, external work, plastic dissipation) or errors (log10).
 fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
-    use ratatui::widgets::{Dataset, LegendPosition};
     let log = |v: f64| (v > 0.0 && v.is_finite()).then(|| v.log10());
     let colors = [Color::Cyan, Color::Yellow, Color::Red, Color::Green, Color::Magenta];
     /// A named series of `(step, value)`.
@@ -619,6 +836,15 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
                         .map(|r| (r.step as f64, r.energy.plastic_dissipation))
                         .collect(),
                 ),
+                (
+                    "ghost".into(),
+                    // Only when the ghost penalty took up any work.
+                    if app.reports.iter().any(|r| r.energy.ghost != 0.0) {
+                        app.reports.iter().map(|r| (r.step as f64, r.energy.ghost)).collect()
+                    } else {
+                        Vec::new()
+                    },
+                ),
             ],
         ),
     };
@@ -645,19 +871,23 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
             format!("1e{v}")
         }
     };
-    let datasets: Vec<Dataset> = series
+    let named: Vec<Named> = series
         .iter()
         .enumerate()
-        .map(|(k, (name, data))| line(name, colors[k % colors.len()], data))
+        .map(|(k, (name, data))| (name.as_str(), colors[k % colors.len()], data.as_slice(), true))
         .collect();
-    let empty = datasets.is_empty();
-    let chart = framed(
-        datasets,
-        if empty {
-            format!("{title}— nothing yet (v: next chart) ")
-        } else {
-            format!("{title}(v: next chart) ")
-        },
+    let mut title = if named.is_empty() {
+        format!("{title}— nothing yet ")
+    } else {
+        title
+    };
+    // The key hint only where it fits whole in the top border.
+    if title.chars().count() + 16 <= area.width.saturating_sub(2) as usize {
+        title.push_str("(v: next chart) ");
+    }
+    let chart = with_legend(
+        &named,
+        title,
         // One step: centre its dot rather than put it on the edge.
         if xmax > 1.0 {
             ([1.0, xmax], ["1".into(), format!("{xmax}")])
@@ -665,16 +895,15 @@ fn draw_per_step(frame: &mut Frame, app: &App, area: Rect, kind: ChartKind) {
             ([0.0, 2.0], ["0".into(), "2".into()])
         },
         ([ymin, ymax], [label(ymin), label(ymax)]),
-    )
-    .legend_position(Some(LegendPosition::TopLeft))
-    .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1)));
+        area,
+        app.show_legend,
+    );
     frame.render_widget(chart, area);
 }
 
 /// Energies against time (explicit dynamics): kinetic, strain, plastic
 /// dissipation and their sum, as G Figs. 13-14 chart them.
 fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
-    use ratatui::widgets::Dataset;
     type Part = (&'static str, Color, fn(&StepReport) -> f64);
     let parts: [Part; 4] = [
         ("kinetic", Color::Cyan, |r| r.energy.kinetic),
@@ -696,16 +925,18 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
         .collect();
     let tmax = series[0].last().map_or(1.0, |p| p.0).max(1e-12);
     let emax = series.iter().flatten().map(|p| p.1).fold(0.0, f64::max).max(1e-300);
-    let datasets: Vec<Dataset> = parts
+    let named: Vec<Named> = parts
         .iter()
         .zip(&series)
-        .map(|((name, color, _), s)| line(name, *color, s))
+        .map(|((name, color, _), s)| (*name, *color, s.as_slice(), true))
         .collect();
-    let chart = framed(
-        datasets,
+    let chart = with_legend(
+        &named,
         format!(" energy ({}) against time (s) ", app.units.of(Quantity::Energy)),
         ([0.0, tmax], ["0".into(), format!("{tmax:.3}")]),
         ([0.0, 1.05 * emax], ["0".into(), format!("{:.3e}", 1.05 * emax)]),
+        area,
+        app.show_legend,
     );
     frame.render_widget(chart, area);
 }
@@ -795,10 +1026,18 @@ fn draw_last_step(frame: &mut Frame, app: &App, area: Rect) {
     );
 }
 
-/// The errors against the exact solution on one line, if the scene has one.
+/// The errors against the exact solution, each name with its value (a
+/// no-break space between them: a narrow panel wraps between pairs, never
+/// inside one).
 fn errors_line(r: &StepReport) -> Option<Line<'static>> {
-    let e: Vec<String> = r.errors.iter().map(|e| format!("{} {:.3e}", e.name, e.value)).collect();
-    (!e.is_empty()).then(|| Line::raw(format!("errors: {}", e.join("  "))))
+    (!r.errors.is_empty()).then(|| {
+        let e: Vec<String> = r
+            .errors
+            .iter()
+            .map(|e| format!("{}\u{a0}{:.3e}", e.name, e.value))
+            .collect();
+        Line::raw(format!("errors: {}", e.join("  ")))
+    })
 }
 
 /// A probe's values on one line: `tip: u (ux, uy) m  s (xx, yy, xy) Pa`.
@@ -870,21 +1109,19 @@ fn static_lines(r: &StepReport, u: Units, lines: &mut Vec<Line<'static>>) {
         None => lines.push(Line::raw("cond(K) off")),
     }
     lines.push(Line::raw(format!(
-        "energy: strain {:.4e} {en}  work {:.4e} {en}",
-        r.energy.strain, r.energy.external_work
+        "energy: strain {:.4e} {en}  work {:.4e} {en}{}",
+        r.energy.strain,
+        r.energy.external_work,
+        if r.energy.ghost != 0.0 {
+            format!("  ghost {:.4e} {en}", r.energy.ghost)
+        } else {
+            String::new()
+        }
     )));
     // The errors against the exact solution, then the probes the scene
     // asks for: before the per-boundary lines, which a short panel cuts.
     lines.extend(errors_line(r));
     lines.extend(r.probes.iter().map(|p| Line::raw(probe_line(p, u))));
-    let t = &r.timings;
-    lines.push(Line::raw(format!(
-        "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
-        t.mapping + t.pattern + t.assembly,
-        t.factorisation,
-        t.solve,
-        t.condition
-    )));
     for b in &r.ibm {
         lines.push(Line::raw(format!(
             "{} (IBM): R ({:.3e}, {:.3e}) {force}, violation {:.1e} {len}, {} cells cut",
@@ -906,6 +1143,16 @@ fn static_lines(r: &StepReport, u: Units, lines: &mut Vec<Line<'static>>) {
             }
         )));
     }
+    // The timings last: on a small terminal the panel's last lines are the
+    // ones cut off.
+    let t = &r.timings;
+    lines.push(Line::raw(format!(
+        "time: asm {:.3}s  fact {:.3}s  solve {:.3}s  cond {:.3}s",
+        t.mapping + t.pattern + t.assembly,
+        t.factorisation,
+        t.solve,
+        t.condition
+    )));
 }
 
 fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
@@ -962,6 +1209,7 @@ fn draw_help(frame: &mut Frame, area: Rect) {
         Line::raw("D / d   implicit-boundary delta/h x10 / /10"),
         Line::raw("M / m   ghost mass gamma_M x10 / /10"),
         Line::raw("v       next chart: residual, condition, energy, error, probes"),
+        Line::raw("L       show or hide the charts' legends"),
         Line::raw("p / P   probe chart: next quantity on y / on x"),
         Line::raw("w       write a checkpoint of this step (checkpoints/)"),
         Line::raw("V       start / stop a ParaView series from this step (vtk/)"),

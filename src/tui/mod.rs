@@ -59,6 +59,7 @@ pub fn action_for(code: KeyCode) -> Option<Action> {
         KeyCode::Char('#') => Some(Action::ToggleGrid),
         KeyCode::Char('a') => Some(Action::ToggleActive),
         KeyCode::Char('o') => Some(Action::ToggleGhostFaces),
+        KeyCode::Char('L') => Some(Action::ToggleLegend),
         KeyCode::Esc => Some(Action::CloseOverlay),
         KeyCode::Char('q') => Some(Action::Quit),
         _ => None,

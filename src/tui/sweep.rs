@@ -1,14 +1,15 @@
 //! The sweep view (`mpmlab tui --sweep DIR`): a finished or running
 //! sweep's table, error against wall time with the Pareto front, error
 //! against h, and which runs completed. State, pure drawing, and a small
-//! event loop (arrows/jk scroll, r reloads, q or Esc quits).
+//! event loop (arrows/jk scroll, r reloads, L hides the legends, q or Esc quits).
 
+use super::draw::{place_legend, AxisEnds, Named};
 use crate::sweep::{pareto_front, RunResult};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::symbols::Marker;
 use ratatui::text::{Line, Span};
-use ratatui::widgets::{Axis, Block, Borders, Cell, Chart, Dataset, GraphType, LegendPosition, Paragraph, Row, Table};
+use ratatui::widgets::{Axis, Block, Borders, Cell, Chart, Dataset, GraphType, Paragraph, Row, Table};
 use ratatui::Frame;
 
 /// What the sweep view shows.
@@ -17,11 +18,43 @@ pub struct SweepView {
     pub results: Vec<RunResult>,
     /// First table row shown.
     pub scroll: usize,
+    /// The charts' legends (`L` hides them).
+    pub show_legend: bool,
 }
 
 /// Log10 of the positive finite values, else `None`.
 fn lg(v: f64) -> Option<f64> {
     (v > 0.0 && v.is_finite()).then(|| v.log10())
+}
+
+/// A chart title of whole words in a block `width` wide: `main` and
+/// `extra` where both fit, else `main` alone, else `main`'s words that
+/// fit and an ellipsis.
+fn fit_title(main: &str, extra: &str, width: u16) -> String {
+    let room = width.saturating_sub(2) as usize;
+    let full = format!("{main}{extra}");
+    if full.chars().count() <= room {
+        return full;
+    }
+    if main.chars().count() < room {
+        return format!("{main} ");
+    }
+    let mut out = String::new();
+    for word in main.split_whitespace() {
+        if out.chars().count() + word.chars().count() + 4 > room {
+            break;
+        }
+        out.push(' ');
+        out.push_str(word);
+    }
+    format!("{out} … ")
+}
+
+/// An axis's bounds with its two end labels, as the legend placement
+/// takes them.
+fn ends(bounds: [f64; 2], labels: Vec<String>) -> AxisEnds {
+    let mut l = labels.into_iter();
+    (bounds, [l.next().unwrap_or_default(), l.next().unwrap_or_default()])
 }
 
 /// Bounds with a little margin, and decade labels.
@@ -111,7 +144,7 @@ pub fn draw(frame: &mut Frame, v: &SweepView) {
     let [table, est, map] = Layout::vertical([
         Constraint::Min(5),
         Constraint::Length(est_height),
-        Constraint::Length(stability_height(v)),
+        Constraint::Length(stability_height(v, left.height)),
     ])
     .areas(left);
     draw_table(frame, v, table);
@@ -123,7 +156,7 @@ pub fn draw(frame: &mut Frame, v: &SweepView) {
     draw_time_chart(frame, v, top);
     draw_h_chart(frame, v, bottom);
     frame.render_widget(
-        Paragraph::new(" up/down scroll · r reload · q quit").style(Style::new().fg(Color::Gray)),
+        Paragraph::new(" up/down scroll · r reload · L legends · q quit").style(Style::new().fg(Color::Gray)),
         status,
     );
 }
@@ -241,8 +274,10 @@ fn stability_grid(v: &SweepView) -> Grid {
     Grid { rows, cols, cells }
 }
 
-fn stability_height(v: &SweepView) -> u16 {
-    (stability_grid(v).rows.len() as u16 + 3).min(16)
+/// Rows for the stability map: all of them where they fit in half the
+/// column (at least 16), the table keeping the rest.
+fn stability_height(v: &SweepView, column: u16) -> u16 {
+    (stability_grid(v).rows.len() as u16 + 3).min((column / 2).max(16))
 }
 
 /// Which settings completed: a row per combination of the other settings,
@@ -256,7 +291,23 @@ fn draw_stability(frame: &mut Frame, v: &SweepView, area: Rect) {
         "",
         cols.iter().map(|c| format!("{c:<width$}")).collect::<String>()
     ))];
-    for (i, r) in rows.iter().enumerate() {
+    // Where not every row fits, the rows with a failed run come first (in
+    // their order), then completed ones, and a last line counts the rest:
+    // a failure is never hidden for want of room.
+    let failing = |i: usize| cells.iter().any(|c| c.0 == i && !c.2);
+    let room = area.height.saturating_sub(3) as usize;
+    let shown: Vec<usize> = if rows.len() <= room {
+        (0..rows.len()).collect()
+    } else {
+        let keep = room.saturating_sub(1);
+        let mut pick: Vec<usize> = (0..rows.len()).filter(|&i| failing(i)).take(keep).collect();
+        let more = keep - pick.len();
+        pick.extend((0..rows.len()).filter(|&i| !failing(i)).take(more));
+        pick.sort_unstable();
+        pick
+    };
+    let failed = v.results.iter().filter(|r| !r.completed).count();
+    for (i, r) in rows.iter().enumerate().filter(|(i, _)| shown.contains(i)) {
         let mut spans = vec![Span::raw(format!("{:<label$}", if r.is_empty() { "runs" } else { r }))];
         for j in 0..cols.len() {
             let (text, color) = match cells.iter().find(|c| c.0 == i && c.1 == j) {
@@ -268,8 +319,24 @@ fn draw_stability(frame: &mut Frame, v: &SweepView, area: Rect) {
         }
         lines.push(Line::from(spans));
     }
+    let hidden: Vec<usize> = (0..rows.len()).filter(|i| !shown.contains(i)).collect();
+    if !hidden.is_empty() {
+        let with = hidden.iter().filter(|&&i| failing(i)).count();
+        lines.push(Line::styled(
+            if with == 0 {
+                format!("... {} more rows, all ok", hidden.len())
+            } else {
+                format!("... {} more rows, {with} with failures", hidden.len())
+            },
+            Style::new().fg(if with == 0 { Color::Gray } else { Color::Red }),
+        ));
+    }
     frame.render_widget(
-        Paragraph::new(lines).block(Block::default().borders(Borders::ALL).title(" stability map ")),
+        Paragraph::new(lines).block(
+            Block::default()
+                .borders(Borders::ALL)
+                .title(format!(" stability map ({failed} failed) ")),
+        ),
         area,
     );
 }
@@ -300,19 +367,20 @@ fn draw_time_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
             .style(Style::new().fg(Color::Red))
             .data(&line),
     ];
-    frame.render_widget(
-        Chart::new(data.to_vec())
-            .block(
-                Block::default()
-                    .borders(Borders::ALL)
-                    .title(format!(" {} against wall time (log-log) ", v.error_name())),
-            )
-            .x_axis(Axis::default().bounds(xb).labels(xl))
-            .y_axis(Axis::default().bounds(yb).labels(yl))
-            .legend_position(Some(LegendPosition::TopRight))
-            .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1))),
-        area,
-    );
+    let named: [Named; 2] = [
+        ("runs", Color::Cyan, &all, false),
+        ("Pareto front", Color::Red, &line, true),
+    ];
+    let (x, y) = (ends(xb, xl), ends(yb, yl));
+    let chart = Chart::new(data.to_vec())
+        .x_axis(Axis::default().bounds(xb).labels(x.1.clone()))
+        .y_axis(Axis::default().bounds(yb).labels(y.1.clone()));
+    let block = Block::default().borders(Borders::ALL).title(fit_title(
+        &format!(" {} against wall time", v.error_name()),
+        " (log-log) ",
+        area.width,
+    ));
+    frame.render_widget(place_legend(chart, block, &named, (&x, &y), area, v.show_legend), area);
 }
 
 /// The error (lines, with the observed rate) and the condition number
@@ -330,9 +398,10 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
         return;
     };
     let h = key.as_str();
-    let block = Block::default().borders(Borders::ALL).title(format!(
-        " {} (lines) and cond(K) (dots) against {h} (log-log) ",
-        v.error_name()
+    let block = Block::default().borders(Borders::ALL).title(fit_title(
+        &format!(" {} (lines) and cond(K) (dots) against {h}", v.error_name()),
+        " (log-log) ",
+        area.width,
     ));
     // Each group's points from fine to coarse (log10 setting, log10 error),
     // then its condition numbers.
@@ -367,39 +436,48 @@ fn draw_h_chart(frame: &mut Frame, v: &SweepView, area: Rect) {
         Color::Blue,
         Color::White,
     ];
-    let data: Vec<Dataset> = groups
+    // Each series' legend name (lines with their observed rate) and colour.
+    let names: Vec<(String, Color)> = groups
         .iter()
         .enumerate()
         .map(|(k, (label, pts, cond))| {
             if *cond {
-                return Dataset::default()
-                    .name(label.clone())
-                    .marker(Marker::Dot)
-                    .graph_type(GraphType::Scatter)
-                    .style(Style::new().fg(Color::Gray))
-                    .data(pts);
+                return (label.clone(), Color::Gray);
             }
             let rate = match (pts.first(), pts.last()) {
                 (Some(a), Some(b)) if b.0 != a.0 => format!(" (rate {:.2})", (b.1 - a.1) / (b.0 - a.0)),
                 _ => String::new(),
             };
+            (format!("{label}{rate}"), colors[k % colors.len()])
+        })
+        .collect();
+    let data: Vec<Dataset> = groups
+        .iter()
+        .zip(&names)
+        .map(|((_, pts, cond), (name, color))| {
+            let (marker, kind) = if *cond {
+                (Marker::Dot, GraphType::Scatter)
+            } else {
+                (Marker::Braille, GraphType::Line)
+            };
             Dataset::default()
-                .name(format!("{label}{rate}"))
-                .marker(Marker::Braille)
-                .graph_type(GraphType::Line)
-                .style(Style::new().fg(colors[k % colors.len()]))
+                .name(name.clone())
+                .marker(marker)
+                .graph_type(kind)
+                .style(Style::new().fg(*color))
                 .data(pts)
         })
         .collect();
-    frame.render_widget(
-        Chart::new(data)
-            .block(block)
-            .x_axis(Axis::default().bounds(xb).labels(xl))
-            .y_axis(Axis::default().bounds(yb).labels(yl))
-            .legend_position(Some(LegendPosition::TopRight))
-            .hidden_legend_constraints((Constraint::Ratio(1, 1), Constraint::Ratio(1, 1))),
-        area,
-    );
+    let named: Vec<Named> = groups
+        .iter()
+        .zip(&names)
+        .map(|((_, pts, cond), (name, color))| (name.as_str(), *color, pts.as_slice(), !*cond))
+        .collect();
+    let (x, y) = (ends(xb, xl), ends(yb, yl));
+    let chart = Chart::new(data)
+        .x_axis(Axis::default().bounds(xb).labels(x.1.clone()))
+        .y_axis(Axis::default().bounds(yb).labels(y.1.clone()));
+    frame.render_widget(place_legend(chart, block, &named, (&x, &y), area, v.show_legend), area);
 }
 
 /// Show a sweep folder until the user quits; `r` re-reads it (a sweep
@@ -419,6 +497,7 @@ pub fn run(folder: &crate::sweep::Folder, title: &str) -> std::io::Result<()> {
         title: title.to_string(),
         results: load(),
         scroll: 0,
+        show_legend: true,
     };
     let mut terminal = ratatui::init();
     let result = (|| -> std::io::Result<()> {
@@ -435,6 +514,7 @@ pub fn run(folder: &crate::sweep::Folder, title: &str) -> std::io::Result<()> {
                     }
                     KeyCode::Up | KeyCode::Char('k') => view.scroll = view.scroll.saturating_sub(1),
                     KeyCode::Char('r') => view.results = load(),
+                    KeyCode::Char('L') => view.show_legend = !view.show_legend,
                     _ => {}
                 }
             }
