@@ -40,8 +40,10 @@ pub struct IbmBoundary {
     pub gauss_points: usize,
     /// Prescribe the exact solution's displacement (least-squares fit).
     pub exact_field: bool,
-    /// Tikhonov weight of the fit (0: plain B (36)).
-    pub fit_regularisation: f64,
+    /// Tikhonov weight of the fit: `None` automatic (plain B (36), and
+    /// [`AUTO_FIT_REGULARISATION`] in a step where that is singular);
+    /// `Some(0)` plain always; `Some(eps)` always `eps`.
+    pub fit_regularisation: Option<f64>,
     /// The boundary moves with its prescribed displacement (a rigid footing).
     pub moves: bool,
     /// Follows the B-spline boundary with this index, flattened to this
@@ -306,7 +308,7 @@ impl std::fmt::Display for FitError {
                 f,
                 "the least-squares fit of the prescribed boundary values is singular or ill-conditioned \
                  (eigenvalues {lo:.3e} .. {hi:.3e}): node {node} at ({:.6}, {:.6}) barely touches the boundary; \
-                 set fit_regularisation (e.g. 1e-10)",
+                 leave fit_regularisation unset (automatic) or set it (e.g. 1e-10)",
                 position[0], position[1]
             ),
             FitError::Factor(e) => write!(f, "boundary least-squares fit: {e}"),
@@ -316,9 +318,48 @@ impl std::fmt::Display for FitError {
 
 impl std::error::Error for FitError {}
 
+/// The Tikhonov weight an automatic fit takes in a step where the plain
+/// fit B (36) is singular: it decides the values of nodes the boundary
+/// barely touches (pulling them towards the exact field there) and changes
+/// the others by about this share. 1e-10 makes the fit's matrix
+/// positive definite at every h of the plate with a hole (h = 1/2..1/32).
+pub const AUTO_FIT_REGULARISATION: f64 = 1e-10;
+
 /// Global least-squares fit of the exact displacement on the boundaries
-/// with `exact_field` (B (36)); writes the nodal values into `da`.
-fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, da: &mut [P2]) -> Result<(), FitError> {
+/// with `exact_field` (B (36)); writes the nodal values into `da` and
+/// returns the Tikhonov weight it used (0: the plain fit). With no weight
+/// set on any boundary the plain fit is tried first and, if it is singular,
+/// repeated with [`AUTO_FIT_REGULARISATION`].
+fn fit_exact(
+    bs: &[IbmBoundary],
+    grid: &Grid,
+    ex: &ExactSolution,
+    dlambda: f64,
+    da: &mut [P2],
+) -> Result<f64, FitError> {
+    let fitted = bs.iter().filter(|b| b.exact_field);
+    let set = fitted.filter_map(|b| b.fit_regularisation).reduce(f64::max);
+    match set {
+        Some(eps) => fit_exact_with(bs, grid, ex, dlambda, eps, da).map(|_| eps),
+        None => match fit_exact_with(bs, grid, ex, dlambda, 0.0, da) {
+            Ok(()) => Ok(0.0),
+            Err(FitError::IllConditioned { .. }) => {
+                fit_exact_with(bs, grid, ex, dlambda, AUTO_FIT_REGULARISATION, da).map(|_| AUTO_FIT_REGULARISATION)
+            }
+            Err(e) => Err(e),
+        },
+    }
+}
+
+/// [`fit_exact`] with Tikhonov weight `eps`.
+fn fit_exact_with(
+    bs: &[IbmBoundary],
+    grid: &Grid,
+    ex: &ExactSolution,
+    dlambda: f64,
+    eps: f64,
+    da: &mut [P2],
+) -> Result<(), FitError> {
     use std::collections::BTreeMap;
     let mut index: BTreeMap<usize, usize> = BTreeMap::new();
     // Per Gauss point: the stencil's (node, N) pairs, the weight, the value.
@@ -354,11 +395,6 @@ fn fit_exact(bs: &[IbmBoundary], grid: &Grid, ex: &ExactSolution, dlambda: f64, 
     if m == 0 {
         return Ok(());
     }
-    let eps = bs
-        .iter()
-        .filter(|b| b.exact_field)
-        .map(|b| b.fit_regularisation)
-        .fold(0.0, f64::max);
     let mut mat = faer::Mat::<f64>::zeros(m, m);
     let mut rhs = faer::Mat::<f64>::zeros(m, 2);
     for Sample { nodes, w, u } in &entries {
@@ -434,6 +470,9 @@ pub struct IbmReport {
     pub violation: f64,
     /// Root mean square of that deviation along the boundary (m).
     pub violation_rms: f64,
+    /// The Tikhonov weight of the least-squares fit of its values in this
+    /// step (0: the plain fit B (36), or no fit).
+    pub fit_regularisation: f64,
 }
 
 /// Per-step implicit-boundary data: bandwidth, the prescribed increments on
@@ -444,6 +483,9 @@ pub struct IbmStep<'a> {
     /// `d^a` increment per grid node.
     pub da: Vec<P2>,
     pub in_band: Vec<bool>,
+    /// The Tikhonov weight the step's least-squares fit used (0: plain, or
+    /// no fit).
+    pub fit_regularisation: f64,
 }
 
 impl<'a> IbmStep<'a> {
@@ -479,11 +521,18 @@ impl<'a> IbmStep<'a> {
                 }
             }
         }
-        if let Some(ex) = exact {
-            fit_exact(bs, grid, ex, dlambda, &mut da)?;
-        }
+        let fit_regularisation = match exact {
+            Some(ex) => fit_exact(bs, grid, ex, dlambda, &mut da)?,
+            None => 0.0,
+        };
         let in_band = xs.iter().map(|&x| in_band(bs, x, delta)).collect();
-        Ok(IbmStep { bs, delta, da, in_band })
+        Ok(IbmStep {
+            bs,
+            delta,
+            da,
+            in_band,
+            fit_regularisation,
+        })
     }
 
     /// Strain operator rows of a point: `B_bar` (for `d`) per stencil node,
@@ -810,6 +859,7 @@ impl IbmStep<'_> {
                 reaction,
                 violation,
                 violation_rms: if length > 0.0 { (sum_sq / length).sqrt() } else { 0.0 },
+                fit_regularisation: if b.exact_field { self.fit_regularisation } else { 0.0 },
             });
         }
         (reports, work)

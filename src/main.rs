@@ -890,14 +890,19 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     if let Some(r) = &last {
         for b in &r.ibm {
             out!(
-                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) {force}, violation {:.2e} {len} (rms {:.2e} {len}), {} cells cut",
+                "implicit boundary `{}` (step {}): reaction ({:.6e}, {:.6e}) {force}, violation {:.2e} {len} (rms {:.2e} {len}), {} cells cut{}",
                 b.name,
                 r.step,
                 b.reaction[0],
                 b.reaction[1],
                 b.violation,
                 b.violation_rms,
-                b.cut_cells
+                b.cut_cells,
+                if b.fit_regularisation > 0.0 {
+                    format!(", fit regularised (weight {:e})", b.fit_regularisation)
+                } else {
+                    String::new()
+                }
             );
         }
         for b in &r.boundaries {

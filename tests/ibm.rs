@@ -262,7 +262,7 @@ fn plate_hole_symmetry_rollers_by_ibm() {
                         points: pts.to_vec(),
                         displacement: None,
                         exact_field: false,
-                        fit_regularisation: 0.0,
+                        fit_regularisation: None,
                         moves: false,
                         boundary: None,
                         per_segment: 16,
@@ -399,7 +399,7 @@ fn plate_hole_dirichlet_converges() {
     // converges at ~2.26; B Fig. 21: domain errors converge with h, of the
     // size of the Neumann case.
     let hs = [0.5, 0.25, 0.125, 0.0625, 0.03125];
-    let run = |h: f64, reg: f64| {
+    let run = |h: f64, reg: Option<f64>| {
         let mut sim = sim_with("plate-hole-dirichlet", |s| {
             s.grid.h = h;
             s.bodies[0].points_per_cell = 8;
@@ -413,13 +413,15 @@ fn plate_hole_dirichlet_converges() {
                     r.ibm[0].violation_rms,
                     error(&r, "displacement_l2"),
                     error(&r, "stress_l2"),
+                    r.ibm[0].fit_regularisation,
                 ));
             }
         }
         unreachable!()
     };
-    // The plain fit fails, with a clear report, once nodes barely touch the curve.
-    match run(0.0625, 0.0) {
+    // The plain fit (fit_regularisation = 0) fails, with a clear report,
+    // once nodes barely touch the curve.
+    match run(0.0625, Some(0.0)) {
         Err(mpmlab::StepFailure::Singular { reason, .. }) => {
             assert!(
                 reason.contains("least-squares fit")
@@ -430,7 +432,17 @@ fn plate_hole_dirichlet_converges() {
         }
         other => panic!("expected a reported ill-conditioned fit, got {other:?}"),
     }
-    let rows: Vec<(f64, f64, f64)> = hs.iter().map(|&h| run(h, 1e-10).unwrap()).collect();
+    // Unset (automatic), the fit is the plain one where that is regular
+    // (h = 1/2 .. 1/8) and regularised where it is singular (1/16, 1/32):
+    // well-posed at every h without a user parameter.
+    let rows: Vec<(f64, f64, f64)> = hs
+        .iter()
+        .map(|&h| {
+            let r = run(h, None).unwrap();
+            assert_eq!(r.3 > 0.0, h < 0.1, "h = {h}: fit weight {}", r.3);
+            (r.0, r.1, r.2)
+        })
+        .collect();
     for (h, r) in hs.iter().zip(&rows) {
         println!(
             "h = {h}: boundary fit error (rms) {:.3e} m, displacement_l2 {:.3e}, stress_l2 {:.3e}",

@@ -446,7 +446,7 @@ fn dirichlet_matrix_of_fixed_and_roller_boundaries_is_c_section_3() {
         value: [0.0, 0.0],
         gauss_points: 2,
         exact_field: false,
-        fit_regularisation: 0.0,
+        fit_regularisation: None,
         moves: false,
         spline: None,
     };
@@ -577,7 +577,7 @@ fn band_quadrature_integrates_the_strip_along_an_inclined_boundary() {
             value: [0.0, 0.0],
             gauss_points: 2,
             exact_field: false,
-            fit_regularisation: 0.0,
+            fit_regularisation: None,
             moves: false,
             spline: None,
         };
@@ -749,7 +749,7 @@ fn band_integral_is_c18_for_any_width() {
         value: [0.0, 0.0],
         gauss_points: 2,
         exact_field: false,
-        fit_regularisation: 0.0,
+        fit_regularisation: None,
         moves: false,
         spline: None,
     };

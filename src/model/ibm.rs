@@ -140,7 +140,7 @@ pub(super) fn build(
                 [u, 0.0]
             }
         };
-        if !(spec.fit_regularisation >= 0.0 && spec.fit_regularisation < 1.0) {
+        if spec.fit_regularisation.is_some_and(|e| !(0.0..1.0).contains(&e)) {
             return Err(FieldError::new(f("fit_regularisation"), "must lie in [0, 1)"));
         }
         if spec.exact_field {

@@ -252,10 +252,12 @@ pub struct IbmSpec {
     pub exact_field: bool,
     /// With `exact_field`: Tikhonov weight `eps` pulling each nodal value
     /// towards the exact field at the node, relative to the mean diagonal of
-    /// the fit (0: the plain least-squares fit B (36), which fails with a
-    /// report when nodes barely touch the boundary).
+    /// the fit. Unset: automatic, the plain least-squares fit B (36), and
+    /// [`crate::ibm::AUTO_FIT_REGULARISATION`] only in a step where the
+    /// plain fit is singular (a node barely touches the boundary); 0: the
+    /// plain fit always, failing with a report where it is singular.
     #[serde(default)]
-    pub fit_regularisation: f64,
+    pub fit_regularisation: Option<f64>,
     /// For `fixed` with a uniform `displacement`, or a straight `roller`
     /// with a `normal_displacement`: the boundary itself moves with the
     /// prescribed displacement (a rigid footing pushed in, a platen).
