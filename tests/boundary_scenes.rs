@@ -159,7 +159,19 @@ fn plate_hole_clipped_keeps_the_stress_rate_at_4x4_points() {
 /// Mid-tip downward deflection of the cantilever scene with grid size `h`,
 /// a lattice of points, `pressure` (Pa) over `steps` load steps.
 fn cantilever_tip(h: f64, lattice: [usize; 2], pressure: f64, steps: usize) -> Result<f64, mpmlab::StepFailure> {
+    cantilever_tip_with(h, lattice, pressure, steps, 0.0)
+}
+
+/// [`cantilever_tip`] with Ghost stiffness `gamma_k` (Pa).
+fn cantilever_tip_with(
+    h: f64,
+    lattice: [usize; 2],
+    pressure: f64,
+    steps: usize,
+    gamma_k: f64,
+) -> Result<f64, mpmlab::StepFailure> {
     let mut sim = sim_with("cantilever-follower-pressure", |s| {
+        s.analysis.gamma_k = gamma_k;
         s.grid.h = h;
         // Room below for the tip (deflections up to ~6 m); whole cells.
         s.grid.origin = [0.0, 1.75 - 1.5 * (6.0 / 1.5 + 1.0)];
@@ -212,4 +224,17 @@ fn cantilever_3000_pa_variant() {
     // series moves 15% between the two coarsest discretisations); 5% covers
     // the difference in discretisation, not more.
     assert!((d - 5.09).abs() < 0.05 * 5.09, "{d}");
+    // The paper's own 28 x 8 points complete all 10 steps once the cut
+    // cells' faces carry Ghost stiffness (E/100): 5.2881 m, 3.9% above B's
+    // 5.09 m and 0.5% from the 112 x 32 run above (the mid-tip point probe
+    // reads 5.27-5.33 m for gamma_K = E/1e4 .. E/10): the difference to B is the discretisation
+    // (B's clamp is an implicit boundary, ours the grid line; the 1500 Pa
+    // series sits 0.8% above B's FE reference), not the lost positive
+    // definiteness, which Ghost removes.
+    let g = cantilever_tip_with(0.75, [28, 8], 3000.0, 10, 1.0e4).unwrap();
+    println!("3000 Pa, h = 0.75, 28 x 8 points, gamma_K = E/100: {g:.4} m");
+    assert!(
+        (g - 5.09).abs() < 0.05 * 5.09 && (g / d - 1.0).abs() < 0.02,
+        "{g} vs {d}"
+    );
 }
