@@ -1021,6 +1021,11 @@ struct SweepArgs {
     /// Seconds of runs a --target search may spend.
     #[arg(long, default_value_t = 300.0, requires = "target")]
     budget: f64,
+    /// With --target: other settings to search, each value a family of
+    /// its own refined in h (`body.0.placement=centres,clipped`,
+    /// `body.0.basis=standard,gimp`, `steps=10,20`, `gamma_k=0,1e5`).
+    #[arg(long = "try", value_name = "KEY=V1,V2,...", requires = "target")]
+    tries: Vec<String>,
     /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     collect: Option<PathBuf>,
@@ -1149,7 +1154,17 @@ fn sweep(a: SweepArgs) -> Result<ExitCode> {
         (None, None) => anyhow::bail!("give a scene file, --preset NAME or --collect DIR"),
     };
     if let Some(t) = &a.target {
-        return target_search(&name, &path, a.out.clone(), t, a.budget);
+        let mut tries = Vec::new();
+        for t in &a.tries {
+            match Vary::parse(t) {
+                Ok(v) => tries.push(v),
+                Err(e) => {
+                    eprintln!("error: --try {e}");
+                    return Ok(ExitCode::from(2));
+                }
+            }
+        }
+        return target_search(&name, &path, a.out.clone(), t, a.budget, tries);
     }
     for v in &a.vary {
         varies.push(Vary::parse(v).map_err(anyhow::Error::msg)?);
@@ -1276,7 +1291,14 @@ fn verify(a: &VerifyArgs) -> Result<ExitCode> {
 
 /// `mpmlab sweep SCENE --target Q=TOL`: the cheapest run meeting a target
 /// (exit 0 when one does, 1 when none did within the budget).
-fn target_search(name: &str, path: &Path, out: Option<PathBuf>, target: &str, budget: f64) -> Result<ExitCode> {
+fn target_search(
+    name: &str,
+    path: &Path,
+    out: Option<PathBuf>,
+    target: &str,
+    budget: f64,
+    tries: Vec<mpmlab::sweep::Vary>,
+) -> Result<ExitCode> {
     use mpmlab::scene::Placement;
     use mpmlab::sweep::{driver, target, Folder};
     let t = match target::Target::parse(target) {
@@ -1307,6 +1329,12 @@ fn target_search(name: &str, path: &Path, out: Option<PathBuf>, target: &str, bu
     if let Err(code) = load(path, &Limits::default()) {
         return Ok(code);
     }
+    if !tries.is_empty() {
+        if let Err(e) = validate_runs(&base, &[], &mpmlab::sweep::expand(&tries)) {
+            eprintln!("error: --try: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    }
     // Points per cell is a setting of the search only where every body
     // places its points per cell.
     let ppc = scene
@@ -1328,7 +1356,11 @@ fn target_search(name: &str, path: &Path, out: Option<PathBuf>, target: &str, bu
         &folder,
         &exe,
         &base,
-        target::Start { h: scene.grid.h, ppc },
+        target::Start {
+            h: scene.grid.h,
+            ppc,
+            tries,
+        },
         &t,
         budget,
         &|line| out!("{line}"),

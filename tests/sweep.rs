@@ -421,9 +421,20 @@ fn a_target_search_predicts_and_meets_the_error() {
         rows.iter().any(|r| r.id == "h=0.25_ppc=2") && rows.len() >= 4,
         "{rows:?}"
     );
-    // A target that is not a quantity is refused before anything runs.
+    // A target that is not a quantity, or a setting to try that the scene
+    // rejects, is refused before anything runs.
     let (code, _, err) = mpmlab(&["sweep", "scenarios/column-small-strain.toml", "--target", "stress=1"]);
     assert_eq!(code, 2, "{err}");
+    let (code, _, err) = mpmlab(&[
+        "sweep",
+        "scenarios/column-small-strain.toml",
+        "--target",
+        "error:syy_normalised=1e-2",
+        "--try",
+        "body.0.basis=quadratic",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--try"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

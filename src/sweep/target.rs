@@ -2,9 +2,10 @@
 //! cheapest discretisation that meets an error target, found by refining
 //! coarse to fine and predicting from the observed order where to stop.
 //!
-//! The search refines h by halving (from twice the scene's h) in two
-//! families of points per cell: the scene's and twice it (when the scene
-//! places points per cell). After each run the target's measure is read:
+//! The search refines h by halving (from twice the scene's h) in families:
+//! the scene's points per cell and twice them (when the scene places points
+//! per cell), each with every combination of the `--try` settings (basis,
+//! placement, load steps, delta, gamma_K: what the user names). After each run the target's measure is read:
 //!
 //! - `error:<name>` (a scene with an exact solution): the measured error;
 //! - `probe:<name>:<key>` or `energy:<name>`: the relative GCI of the three
@@ -136,11 +137,14 @@ pub fn next_h(h: f64, e: f64, p: f64, tol: f64) -> (f64, f64) {
 }
 
 /// Where a search starts: the scene's cell size and, where its bodies
-/// place points per cell, their number.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// place points per cell, their number; and the other settings to try,
+/// each value a family of its own (`--try KEY=V1,V2`: basis, placement,
+/// load steps, delta, gamma_K, ...).
+#[derive(Clone, Debug, PartialEq)]
 pub struct Start {
     pub h: f64,
     pub ppc: Option<usize>,
+    pub tries: Vec<Vary>,
 }
 
 /// Search `base` (the scene's text) from `start` for the cheapest run
@@ -155,15 +159,28 @@ pub fn search(
     progress: &(dyn Fn(String) + Sync),
 ) -> Result<Found, String> {
     let (scene_h, scene_ppc) = (start.h, start.ppc);
-    let families: Vec<Option<usize>> = match scene_ppc {
+    let ppcs: Vec<Option<usize>> = match scene_ppc {
         Some(p) => vec![Some(p), Some(2 * p)],
         None => vec![None],
     };
+    // Every points-per-cell option with every combination of the tries.
+    let others = super::expand(&start.tries);
+    let families: Vec<(Option<usize>, Vec<(String, String)>)> = ppcs
+        .iter()
+        .flat_map(|p| {
+            let settings: Vec<Vec<(String, String)>> = if others.is_empty() {
+                vec![Vec::new()]
+            } else {
+                others.iter().map(|r| r.settings.clone()).collect()
+            };
+            settings.into_iter().map(move |s| (*p, s))
+        })
+        .collect();
     let mut steps: Vec<Step> = Vec::new();
     let mut order: Vec<String> = Vec::new();
     let mut spent = 0.0;
     let mut ended = String::from("every family met the target or stopped");
-    for ppc in families {
+    for (ppc, tried) in families {
         let mut h = 2.0 * scene_h;
         let mut predicted = f64::NAN;
         let mut family: Vec<RunResult> = Vec::new();
@@ -179,6 +196,10 @@ pub fn search(
                     values: vec![p.to_string()],
                 });
             }
+            varies.extend(tried.iter().map(|(k, v)| Vary {
+                key: k.clone(),
+                values: vec![v.clone()],
+            }));
             let runs = driver::prepare(folder, base, &[], &varies)?;
             for r in &runs {
                 if !order.contains(&r.id) {
