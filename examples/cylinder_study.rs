@@ -15,6 +15,9 @@
 //!   region; the inner and outer B-splines through explicit tracking points
 //!   on the two circles (layers of points need the polar lattice);
 //! - `centres-gimp-N` / `clipped-gimp-N`: the same with the GIMP basis.
+//! - `quadrature`: no runs; each cell's point rule for the polar lattice
+//!   (and 4 x 4 clipped points) against the cell's exact volume and first
+//!   moment, for the cells wholly inside the annulus.
 //!
 //! The output is in docs/verification.md; the assertions are in
 //! `tests/boundary_scenes.rs`.
@@ -51,6 +54,9 @@ fn arc(r: f64, n: usize) -> Vec<[f64; 2]> {
         })
         .collect()
 }
+
+/// A change to the scene before it is built.
+type Edit = Box<dyn FnOnce(&mut Scene)>;
 
 struct Row {
     h: f64,
@@ -216,7 +222,7 @@ fn main() {
             }
         }
     };
-    let cases: Vec<(f64, Box<dyn FnOnce(&mut Scene)>)> = match study {
+    let cases: Vec<(f64, Edit)> = match study {
         "paper" | "paper-gimp" | "faster" | "test" => {
             let basis = if study == "paper-gimp" {
                 BasisKind::Gimp
@@ -231,18 +237,13 @@ fn main() {
             hs.iter()
                 .map(|&h| {
                     let k = k0 * (1.0 / h).round() as usize;
-                    (h, Box::new(polar(k, basis)) as Box<dyn FnOnce(&mut Scene)>)
+                    (h, Box::new(polar(k, basis)) as Edit)
                 })
                 .collect()
         }
         "fixed-h" => [4, 8, 16]
             .iter()
-            .map(|&k| {
-                (
-                    0.25,
-                    Box::new(polar(2 * k, BasisKind::Standard)) as Box<dyn FnOnce(&mut Scene)>,
-                )
-            })
+            .map(|&k| (0.25, Box::new(polar(2 * k, BasisKind::Standard)) as Edit))
             .collect(),
         other => {
             let mut parts = other.split('-').collect::<Vec<_>>();
@@ -260,7 +261,7 @@ fn main() {
             hs.iter()
                 .map(|&h| {
                     let edit = move |s: &mut Scene| sub_cell_points(s, placement, n, basis, chord);
-                    (h, Box::new(edit) as Box<dyn FnOnce(&mut Scene)>)
+                    (h, Box::new(edit) as Edit)
                 })
                 .collect()
         }
