@@ -14,7 +14,9 @@
 //! - `centres-N` / `clipped-N`: N x N points per cell on the annulus-sector
 //!   region; the inner and outer B-splines through explicit tracking points
 //!   on the two circles (layers of points need the polar lattice);
-//! - `centres-gimp-N` / `clipped-gimp-N`: the same with the GIMP basis.
+//! - `centres-gimp-N` / `clipped-gimp-N`: the same with the GIMP basis and
+//!   one more cell of grid below and left (clipped: singular at h = 1, the
+//!   nodes beyond the symmetry lines held by slivers of domains).
 //! - `quadrature`: no runs; each cell's point rule for the polar lattice
 //!   (and 4 x 4 clipped points) against the cell's exact volume and first
 //!   moment, for the cells wholly inside the annulus.
@@ -144,6 +146,12 @@ fn sub_cell_points(s: &mut Scene, placement: Placement, n: usize, basis: BasisKi
     b.basis = basis;
     b.radial_points = None;
     b.circumferential_points = None;
+    if basis == BasisKind::Gimp {
+        // As for the polar points: room for the domains across the symmetry lines.
+        s.grid.origin = [-1.0, -1.0];
+        s.grid.size = [7.0, 7.0];
+    }
+    let b = &mut s.bodies[0];
     if let (Some(t), RegionSpec::AnnulusSector { tolerance, .. }) = (chord, &mut b.region) {
         *tolerance = Some(t);
     }
