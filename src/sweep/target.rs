@@ -136,6 +136,10 @@ pub fn next_h(h: f64, e: f64, p: f64, tol: f64) -> (f64, f64) {
     (h * 0.5f64.powi(k), predict(k))
 }
 
+/// A family of the search: points per cell (if the scene places them per
+/// cell) and the tried settings it holds fixed.
+type Family = (Option<usize>, Vec<(String, String)>);
+
 /// Where a search starts: the scene's cell size and, where its bodies
 /// place points per cell, their number; and the other settings to try,
 /// each value a family of its own (`--try KEY=V1,V2`: basis, placement,
@@ -165,7 +169,7 @@ pub fn search(
     };
     // Every points-per-cell option with every combination of the tries.
     let others = super::expand(&start.tries);
-    let families: Vec<(Option<usize>, Vec<(String, String)>)> = ppcs
+    let families: Vec<Family> = ppcs
         .iter()
         .flat_map(|p| {
             let settings: Vec<Vec<(String, String)>> = if others.is_empty() {
