@@ -41,6 +41,7 @@ pub mod model;
 mod newton;
 pub mod points;
 pub mod probe;
+pub mod procfs;
 pub mod quadrature;
 pub mod record;
 pub mod report;

@@ -153,19 +153,7 @@ impl FactorError {
     }
 }
 
-/// The process's resident memory now (`VmRSS` of /proc/self/status).
-pub fn resident_bytes() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kb: u64 = text
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))?
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    kb.checked_mul(1024)
-}
+pub use crate::procfs::resident_bytes;
 
 /// Refuse an allocation of `bytes` for `what` that would take the process's
 /// resident memory beyond `budget` (`u64::MAX`: no check).

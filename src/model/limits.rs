@@ -19,19 +19,7 @@ impl Default for Limits {
     }
 }
 
-/// `MemAvailable` of /proc/meminfo (bytes).
-pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let kb: u64 = text
-        .lines()
-        .find_map(|l| l.strip_prefix("MemAvailable:"))?
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    kb.checked_mul(1024)
-}
+pub use crate::procfs::available_memory;
 
 /// Bytes in words: `512 B`, `3.2 MB`, `18.4 GB` (powers of 1000).
 pub fn bytes(b: u64) -> String {

@@ -328,18 +328,7 @@ pub struct RunResult {
 /// The columns of a recorded run, after the errors.
 pub const RECORD_COLUMNS: [&str; 3] = ["record_bytes", "record_bytes_per_step", "record_bytes_per_point"];
 
-/// Peak resident set size of this process (kB), from `/proc/self/status`
-/// (0 where it is not available).
-pub fn peak_rss_kb() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find_map(|l| l.strip_prefix("VmHWM:"))
-                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        })
-        .unwrap_or(0)
-}
+pub use crate::procfs::peak_resident_kb as peak_rss_kb;
 
 /// Run the scene file of one run in this process, to the end or the first
 /// failure.
