@@ -240,6 +240,109 @@ impl IbmBoundary {
     }
 }
 
+impl IbmBoundary {
+    /// Per node of the cells the boundary cuts, how much of it the
+    /// boundary constrains and along which directions:
+    /// `W_b(n) = int_Gamma_b N_n P_b ds`, with `P_b = I` for a fixed
+    /// boundary and `n n^T` for a roller, `N_n` the grid's bilinear
+    /// function (3 Gauss points per piece: `N_n` is quadratic along it).
+    pub fn constraint_weights(&self, grid: &Grid) -> std::collections::BTreeMap<usize, M2> {
+        let mut out: std::collections::BTreeMap<usize, M2> = Default::default();
+        let (xg, wg) = gauss_legendre(3);
+        for (a, e, _) in self.pieces(grid) {
+            let n = self.normal(a, e);
+            let len = (e[0] - a[0]).hypot(e[1] - a[1]);
+            let p = match self.kind {
+                DirichletKind::Fixed => I2,
+                DirichletKind::Roller => [[n[0] * n[0], n[0] * n[1]], [n[1] * n[0], n[1] * n[1]]],
+            };
+            for (xi, wi) in xg.iter().zip(&wg) {
+                let t = 0.5 * (1.0 + xi);
+                let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
+                let st = grid_stencil(grid, [x[0] + 1e-9 * grid.h * n[0], x[1] + 1e-9 * grid.h * n[1]]);
+                for (k, nk, _) in st.iter() {
+                    let w = 0.5 * len * wi * nk;
+                    let m = out.entry(k).or_insert([[0.0; 2]; 2]);
+                    for r in 0..2 {
+                        for c in 0..2 {
+                            m[r][c] += w * p[r][c];
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Share a node's out-of-balance `r` among the constraints acting on it:
+/// the implicit boundaries with weights `ws` (their [`IbmBoundary::constraint_weights`]
+/// at the node) and the grid's supports, `grid[c]` the weight of a grid
+/// support holding component `c` there (0: none). Returns each implicit
+/// boundary's share.
+///
+/// The out-of-balance with the plain test function `N_n e_c` is the
+/// virtual work of the supports' tractions: the trial space
+/// `u = D S d + S d^a` (C section 3) satisfies the weak form for the test
+/// functions `D N_n e_c` only, and `N_n e_c - D N_n e_c = (I - D) N_n e_c`
+/// lives in the bands, where `grad (I - D)` (`d'(phi) n`) turns
+/// the band integral into `int_Gamma_b N_n (P_b sigma n) ds` as
+/// `delta -> 0`. So `r_n = sum_b int_Gamma_b N_n t_b ds`, with each
+/// boundary's traction `t_b` in the range of its `P_b` (a roller pushes
+/// along its normal only, a grid roller along its axis). Writing each
+/// share as `W_b(n) y` with `W_b(n) = int_Gamma_b N_n P_b ds`, the common
+/// `y` solves `M y = r_n`, `M = sum_b W_b(n)`: for tractions that are
+/// constant over the node's support this is exact (`y` is the traction),
+/// and where the constraints' directions are independent and each is
+/// one-dimensional (two rollers at a corner, C 5.1; a roller and a grid
+/// roller) the split is exact whatever the weights, since then `r_n`
+/// has one decomposition along them. Where the directions do not span the
+/// plane (one roller, or parallel ones), `M` is singular: `y = M^+ r_n`
+/// and what `M` cannot carry goes to the implicit boundaries in proportion
+/// to `tr W_b(n)`, so the shares always add up to `r_n` less the grid
+/// supports' part (reactions and loads balance). A node serving a single
+/// implicit boundary and no grid support gives it all of `r_n`.
+pub fn split_reaction(r: P2, ws: &[M2], grid: [f64; 2]) -> Vec<P2> {
+    let mut m = [[grid[0], 0.0], [0.0, grid[1]]];
+    for w in ws {
+        m = add(&m, w);
+    }
+    let y = {
+        let p = pinv_sym(&m);
+        [p[0][0] * r[0] + p[0][1] * r[1], p[1][0] * r[0] + p[1][1] * r[1]]
+    };
+    let apply = |w: &M2| [w[0][0] * y[0] + w[0][1] * y[1], w[1][0] * y[0] + w[1][1] * y[1]];
+    let carried = apply(&m);
+    let rest = [r[0] - carried[0], r[1] - carried[1]];
+    let traces: Vec<f64> = ws.iter().map(|w| w[0][0] + w[1][1]).collect();
+    let total: f64 = traces.iter().sum();
+    ws.iter()
+        .zip(&traces)
+        .map(|(w, tr)| {
+            let f = if total > 0.0 { tr / total } else { 1.0 / ws.len() as f64 };
+            let s = apply(w);
+            [s[0] + f * rest[0], s[1] + f * rest[1]]
+        })
+        .collect()
+}
+
+/// Pseudo-inverse of a symmetric positive semi-definite 2 x 2 matrix
+/// (rank 1: `m = s v v^T`, `m^+ = m / s^2` with `s = tr m`).
+fn pinv_sym(m: &M2) -> M2 {
+    let (a, b, c) = (m[0][0], 0.5 * (m[0][1] + m[1][0]), m[1][1]);
+    let tr = a + c;
+    if tr <= 0.0 {
+        return [[0.0; 2]; 2];
+    }
+    let det = a * c - b * b;
+    if det > 1e-10 * tr * tr {
+        [[c / det, -b / det], [-b / det, a / det]]
+    } else {
+        let s = tr * tr;
+        [[a / s, b / s], [b / s, c / s]]
+    }
+}
+
 /// The combined `D = D_1 D_2 ...` and its gradient at `x`.
 pub fn d_total(bs: &[IbmBoundary], x: P2, delta: f64) -> (M2, [M2; 2]) {
     let mut d = I2;
@@ -462,8 +565,9 @@ pub struct IbmReport {
     /// Cells the boundary cuts.
     pub cut_cells: usize,
     /// Force the boundary exerts on the material at the end of the step
-    /// (N per unit thickness): `f_int - f_ext` (every load, tractions
-    /// included) summed over the free dofs of its cut cells' nodes.
+    /// (N per unit thickness): the out-of-balance `f_int - f_ext` (every
+    /// load, tractions included) of its cut cells' nodes, each node's
+    /// shared with the other constraints acting there ([`split_reaction`]).
     pub reaction: P2,
     /// Largest deviation of the step's displacement increment on the
     /// boundary from its prescribed increment (m).
@@ -757,16 +861,51 @@ impl IbmStep<'_> {
         ]
     }
 
+    /// The weight of the grid support holding component `c` of node `n`
+    /// for [`split_reaction`]: `int N_n ds` over the grid line through `n`
+    /// that the support holds (the edges to neighbours held in the same
+    /// component), where it lies in the material as the implicit
+    /// boundaries bound it (`phi >= 0` for each, or beside its ends).
+    fn grid_weight(&self, grid: &Grid, free: &dyn Fn(usize, usize) -> bool, n: usize, c: usize) -> f64 {
+        let (i, j) = grid.node_ij(n);
+        let x0 = grid.node_position(n);
+        let inside = |x: P2| self.bs.iter().all(|b| b.distance(x).is_none_or(|(phi, _)| phi >= 0.0));
+        let (xg, wg) = gauss_legendre(3);
+        let mut w = 0.0;
+        for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (a, b) = (i as i64 + di, j as i64 + dj);
+            if a < 0 || b < 0 || a > grid.nx as i64 || b > grid.ny as i64 {
+                continue;
+            }
+            let m = grid.node(a as usize, b as usize);
+            if free(m, c) {
+                continue;
+            }
+            let x1 = grid.node_position(m);
+            for (xi, wi) in xg.iter().zip(&wg) {
+                let t = 0.5 * (1.0 + xi);
+                let x = [x0[0] + t * (x1[0] - x0[0]), x0[1] + t * (x1[1] - x0[1])];
+                if inside(x) {
+                    w += 0.5 * grid.h * wi * (1.0 - t);
+                }
+            }
+        }
+        w
+    }
+
     /// Reports of the boundaries after a step, and the work their reactions
     /// did in it (trapezoidal). `free(node, component)` tells which dofs
-    /// are unknowns of the step.
+    /// are unknowns of the step; the others are held by the grid's own
+    /// supports (or carry no material).
     ///
     /// `residual0` and `residual` are the out-of-balance of the material
-    /// (internal minus every external force, per node) at the start and the
-    /// end of the step: where the implicit boundaries act, it is their
-    /// reaction. Each boundary's reaction sums it over the free dofs of its
-    /// cut cells' nodes; the violation compares the increment on the
-    /// boundary (`D S d + S d^a` at phi = 0) with the prescribed one.
+    /// (internal minus every external force, per node; at grid-held dofs
+    /// the internal force) at the start and the end of the step: where the
+    /// implicit boundaries act, it is their reaction. Where a node serves
+    /// one boundary only, that boundary takes its whole out-of-balance;
+    /// where several constraints meet, [`split_reaction`] shares it out.
+    /// The violation compares the increment on the boundary
+    /// (`D S d + S d^a` at phi = 0) with the prescribed one.
     #[allow(clippy::too_many_arguments)]
     pub fn reports(
         &self,
@@ -806,16 +945,37 @@ impl IbmStep<'_> {
                 work += 0.5 * (residual0[n][c] + residual[n][c]) * (nodal_d[n][c] + self.da[n][c]);
             }
         }
-        let mut reports = Vec::new();
-        for (b, (cells, nodes)) in self.bs.iter().zip(&cut) {
-            // The support force on the body balances the out-of-balance
-            // force of the material there: R = f_int - f_ext.
-            let mut reaction = [0.0; 2];
+        // Reactions: each node's out-of-balance shared among the
+        // constraints that act on it.
+        let weights: Vec<std::collections::BTreeMap<usize, M2>> =
+            self.bs.iter().map(|b| b.constraint_weights(grid)).collect();
+        let mut at_node: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+        for (k, (_, nodes)) in cut.iter().enumerate() {
             for &n in nodes {
-                for c in (0..2).filter(|&c| free(n, c)) {
-                    reaction[c] += residual[n][c];
-                }
+                at_node.entry(n).or_default().push(k);
             }
+        }
+        let mut reactions = vec![[0.0; 2]; self.bs.len()];
+        for (&n, list) in &at_node {
+            let ws: Vec<M2> = list
+                .iter()
+                .map(|&k| weights[k].get(&n).copied().unwrap_or([[0.0; 2]; 2]))
+                .collect();
+            let grid_held: [f64; 2] = [0, 1].map(|c| {
+                if free(n, c) {
+                    0.0
+                } else {
+                    self.grid_weight(grid, free, n, c)
+                }
+            });
+            let shares = split_reaction(residual[n], &ws, grid_held);
+            for (&k, s) in list.iter().zip(shares) {
+                reactions[k][0] += s[0];
+                reactions[k][1] += s[1];
+            }
+        }
+        let mut reports = Vec::new();
+        for ((b, (cells, _)), reaction) in self.bs.iter().zip(&cut).zip(reactions) {
             // Violation: the increment on the boundary (phi = 0) against the
             // prescribed one, sampled at each piece's ends (for the largest)
             // and its three Gauss points (for the root mean square along the

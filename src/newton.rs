@@ -902,19 +902,23 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
         // the end of the step: the implicit boundaries' reactions.
         let zero = vec![[0.0; 2]; d.len()];
         let it0 = evaluate_with(sim, map, &zero, Some((&b.ops, &zero, &zero)));
-        let per_node = |fint: &[f64], ext: &dyn Fn(usize) -> f64| {
+        // At grid-held dofs the internal force: a node shared with a grid
+        // support splits it with that support (`IbmStep::reports`).
+        let per_node = |fint: &[f64], fixed: &[f64], ext: &dyn Fn(usize) -> f64| {
             let mut out = vec![[0.0; 2]; d.len()];
             for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
                 for c in 0..2 {
-                    if let Dof::Free(i) = dofs[c] {
-                        out[n][c] = fint[i] - ext(i);
+                    match dofs[c] {
+                        Dof::Free(i) => out[n][c] = fint[i] - ext(i),
+                        Dof::Fixed(i) => out[n][c] = fixed[i],
+                        Dof::Inactive => {}
                     }
                 }
             }
             out
         };
-        let r0 = per_node(&it0.fint_free, &|i| lambda0 * forces.ext[i]);
-        let r1 = per_node(&it.fint_free, &|i| res.fext[i]);
+        let r0 = per_node(&it0.fint_free, &it0.fint_fixed, &|i| lambda0 * forces.ext[i]);
+        let r1 = per_node(&it.fint_free, &it.fint_fixed, &|i| res.fext[i]);
         let (reports, w) = b.step.reports(
             &sim.model.grid,
             &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
