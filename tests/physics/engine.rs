@@ -1,7 +1,7 @@
 //! Engine invariants: energy balance, condition number methods agree,
 //! snapshots, and failures as values.
 
-mod common;
+use crate::common;
 use common::{run_all, sim_with};
 use mpmlab::linalg::ConditionMethod;
 use mpmlab::scene::ConditionMode;

@@ -1,7 +1,6 @@
 //! Point generation: clipped sub-cells give total volume equal to the region
 //! area for polygons at any rotation and offset.
 
-mod common;
 use mpmlab::Model;
 use proptest::prelude::*;
 

@@ -2,7 +2,7 @@
 //! block at any inclination, the bandwidth trade-off, and patch tests at
 //! random inclinations.
 
-mod common;
+use crate::common;
 use common::{error, run_all, sim_with};
 use mpmlab::StepReport;
 use proptest::prelude::*;

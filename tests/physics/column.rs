@@ -1,7 +1,7 @@
 //! Column under self-weight (small strain, one step): the vertical stress
 //! error against rho g (H - y) falls under h refinement, standard and GIMP.
 
-mod common;
+use crate::common;
 use common::{error, run_all, sim_with};
 use mpmlab::basis::BasisKind;
 

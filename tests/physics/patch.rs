@@ -9,7 +9,7 @@
 //! not a solution of the discrete problem (that is what the implicit boundary
 //! method is for). Free faces (s_xx = 0) may sit anywhere.
 
-mod common;
+use crate::common;
 use common::{error, run_all, sim_with};
 use mpmlab::basis::BasisKind;
 use mpmlab::scene::RegionSpec;

@@ -3,7 +3,7 @@
 //! test writes that finite-element solve independently (its own shape
 //! functions, quadrature, assembly and dense solver) and compares.
 
-mod common;
+use crate::common;
 use common::{run_all, sim_with};
 
 const H: f64 = 0.25;

@@ -2,7 +2,7 @@
 //! et al.): global tangent against finite differences, Newton's rate, the
 //! column under self-weight (G 5.4) and the elastic beam (G 5.5).
 
-mod common;
+use crate::common;
 use common::{error, run_all, sim_with};
 use mpmlab::exact::elastica_tip;
 use mpmlab::{Simulation, StepFailure};

@@ -1,7 +1,7 @@
 //! Explicit dynamics against G section 5.1-5.3 and G 2.6/3.5: exact paths
 //! of free motion, mass conditioning, energy balance, momentum.
 
-mod common;
+use crate::common;
 use common::{error, sim_with};
 use mpmlab::scene::{MassKind, RegionSpec, StressUpdate, VelocityUpdate};
 use mpmlab::simulation::StepFailure;

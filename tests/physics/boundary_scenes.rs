@@ -2,7 +2,7 @@
 //! splines on an aligned square (exact), a thick cylinder (Lame), a plate
 //! with a hole (Kirsch) and a cantilever under follower pressure.
 
-mod common;
+use crate::common;
 use common::{error, run_all, sim_with};
 use mpmlab::exact::ExactSolution;
 use mpmlab::scene::Placement;

@@ -1,0 +1,24 @@
+//! The engine's tests in one test binary (`cargo test --release --test
+//! physics`; one module with `... --test physics ibm::`): the method's
+//! mathematics, every paper scene and the operators. One binary instead of
+//! fourteen: each test binary links the whole dependency tree (rerun among
+//! it), so a change to the library relinks one binary, not fourteen, which
+//! is what makes CI's rebuild and a mutation run's build short.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod basis;
+mod boundary_scenes;
+mod bspline;
+mod column;
+mod dynamics;
+mod engine;
+mod exact;
+mod fe_equivalence;
+mod finite;
+mod hencky;
+mod ibm;
+mod operators;
+mod patch;
+mod points;
