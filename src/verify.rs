@@ -231,8 +231,8 @@ impl Plan {
 
 /// Deep beam (C 5.2) with `n x n` clipped points on grid `h`, or (`fe`) the
 /// bilinear FE analogue on the same grid (2x2 Gauss points, the left side
-/// fixed on the grid line).
-fn deep_beam(h: f64, n: usize, fe: bool) -> impl Fn(&mut Scene) {
+/// fixed on the grid line). The tests use the same edits.
+pub fn deep_beam(h: f64, n: usize, fe: bool) -> impl Fn(&mut Scene) {
     move |s: &mut Scene| {
         s.grid.h = h;
         s.grid.size = [120.0, 220.0];
@@ -254,6 +254,24 @@ fn deep_beam(h: f64, n: usize, fe: bool) -> impl Fn(&mut Scene) {
     }
 }
 
+/// C 5.3's square moved `a` (mm) across the two cells: region, the four
+/// implicit edges and the exact field's origin.
+pub fn simple_shear(a: f64) -> impl Fn(&mut Scene) {
+    move |s: &mut Scene| {
+        s.bodies[0].region = RegionSpec::Rectangle {
+            min: [a, 0.0],
+            max: [a + 100.0, 100.0],
+        };
+        s.ibm[0].points = vec![[a, 100.0], [a, 0.0]];
+        s.ibm[1].points = vec![[a + 100.0, 0.0], [a + 100.0, 100.0]];
+        s.ibm[2].points = vec![[a, 0.0], [a + 100.0, 0.0]];
+        s.ibm[3].points = vec![[a + 100.0, 100.0], [a, 100.0]];
+        if let Some(ExactSpec::SimpleShear { x0, .. }) = s.exact.as_mut() {
+            *x0 = a;
+        }
+    }
+}
+
 /// Relative error of corner A's vertical displacement against the FE run.
 fn corner_a_error(mp: &Outcome, fe: &Outcome) -> f64 {
     let (a, b) = (mp.boundary_point("", 2)[1], fe.boundary_point("", 2)[1]);
@@ -261,7 +279,7 @@ fn corner_a_error(mp: &Outcome, fe: &Outcome) -> f64 {
 }
 
 /// The column of G 5.4 `cells` tall with penalty `gamma` (Pa).
-fn column(cells: usize, gamma: f64) -> impl Fn(&mut Scene) {
+pub fn column(cells: usize, gamma: f64) -> impl Fn(&mut Scene) {
     move |s: &mut Scene| {
         let h = 50.0 / cells as f64;
         s.grid.h = h;
@@ -433,19 +451,7 @@ pub fn plan() -> Plan {
     // C 5.3: simple shear, every edge by IBM, at offsets across the cells.
     for a in [0.0, 25.0, 99.999] {
         let id = format!("shear-{a}");
-        p.run(&id, "simple-shear-sweep", move |s| {
-            s.bodies[0].region = RegionSpec::Rectangle {
-                min: [a, 0.0],
-                max: [a + 100.0, 100.0],
-            };
-            s.ibm[0].points = vec![[a, 100.0], [a, 0.0]];
-            s.ibm[1].points = vec![[a + 100.0, 0.0], [a + 100.0, 100.0]];
-            s.ibm[2].points = vec![[a, 0.0], [a + 100.0, 0.0]];
-            s.ibm[3].points = vec![[a + 100.0, 100.0], [a, 100.0]];
-            if let Some(ExactSpec::SimpleShear { x0, .. }) = s.exact.as_mut() {
-                *x0 = a;
-            }
-        });
+        p.run(&id, "simple-shear-sweep", simple_shear(a));
         let i = id.clone();
         p.check(
             "C 5.3",

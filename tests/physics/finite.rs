@@ -144,17 +144,7 @@ fn newton_converges_quadratically() {
 }
 
 fn column_error(cells_tall: usize, gamma: f64) -> f64 {
-    let h = 50.0 / cells_tall as f64;
-    let mut sim = sim_with("column-self-weight", |s| {
-        s.grid.h = h;
-        s.grid.size = [h, 50.0];
-        s.bodies[0].region = mpmlab::scene::RegionSpec::Rectangle {
-            min: [0.0, 0.0],
-            max: [h, 50.0],
-        };
-        s.dirichlet[2].x = Some(h);
-        s.analysis.gamma_k = gamma;
-    });
+    let mut sim = sim_with("column-self-weight", mpmlab::verify::column(cells_tall, gamma));
     let r = run_all(&mut sim);
     error(&r, "syy_normalised")
 }

@@ -158,25 +158,7 @@ proptest! {
 /// bilinear FE solve on the same grid (2x2 Gauss points, nodes on x = 0
 /// fixed on the grid).
 fn deep_beam_a(n: usize, h: f64, fe: bool) -> f64 {
-    let mut sim = sim_with("deep-beam-self-weight", |s| {
-        s.grid.h = h;
-        s.grid.size = [120.0, 220.0];
-        s.bodies[0].points_per_cell = n;
-        if fe {
-            s.ibm.clear();
-            s.probes.retain(|p| p.ibm.is_none());
-            s.bodies[0].placement = mpmlab::scene::Placement::Gauss;
-            s.bodies[0].points_per_cell = 2;
-            s.dirichlet.push(mpmlab::scene::DirichletSpec {
-                kind: mpmlab::scene::DirichletKind::Fixed,
-                x: Some(0.0),
-                y: None,
-                node: None,
-                displacement: None,
-                normal_displacement: None,
-            });
-        }
-    });
+    let mut sim = sim_with("deep-beam-self-weight", mpmlab::verify::deep_beam(h, n, fe));
     run_all(&mut sim);
     let b = &sim.model().boundaries[0];
     sim.points().displacement(b.points[2])[1]
@@ -336,19 +318,7 @@ fn simple_shear_is_exact_for_every_offset() {
     // field; the square slides across two cells. C: error < 2e-8 for every
     // offset, including next to cell edges.
     for a in [0.0, 1e-3, 10.0, 25.0, 50.0, 75.0, 99.0, 99.999, 100.0] {
-        let mut sim = sim_with("simple-shear-sweep", |s| {
-            s.bodies[0].region = mpmlab::scene::RegionSpec::Rectangle {
-                min: [a, 0.0],
-                max: [a + 100.0, 100.0],
-            };
-            s.ibm[0].points = vec![[a, 100.0], [a, 0.0]];
-            s.ibm[1].points = vec![[a + 100.0, 0.0], [a + 100.0, 100.0]];
-            s.ibm[2].points = vec![[a, 0.0], [a + 100.0, 0.0]];
-            s.ibm[3].points = vec![[a + 100.0, 100.0], [a, 100.0]];
-            if let Some(mpmlab::scene::ExactSpec::SimpleShear { x0, .. }) = s.exact.as_mut() {
-                *x0 = a;
-            }
-        });
+        let mut sim = sim_with("simple-shear-sweep", mpmlab::verify::simple_shear(a));
         let r = run_all(&mut sim);
         let (es, eu) = (error(&r, "stress_l2"), error(&r, "displacement_l2"));
         println!("offset {a}: stress {es:.3e}, displacement {eu:.3e}");
