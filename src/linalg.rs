@@ -219,6 +219,45 @@ pub fn cholesky_symbolic(a: &SparseColMat<usize, f64>) -> Result<CholeskySymboli
         })
 }
 
+/// A zeroed buffer for the values of a factor of `s`, allocated so that a
+/// failure is an error naming `what`, not an abort.
+pub fn factor_values(s: &SymbolicCholesky<usize>, what: impl FnOnce() -> String) -> Result<Vec<f64>, FactorError> {
+    let mut values = Vec::new();
+    values
+        .try_reserve_exact(s.len_val())
+        .map_err(|_| FactorError::allocation(what(), 8 * s.len_val()))?;
+    values.resize(s.len_val(), 0.0);
+    Ok(values)
+}
+
+/// A factorisation's workspace, allocated fallibly.
+pub fn workspace(req: faer::dyn_stack::StackReq) -> Result<MemBuffer, FactorError> {
+    MemBuffer::try_new(req).map_err(|_| FactorError::allocation("the factorisation's workspace", req.size_bytes()))
+}
+
+/// Numeric `L L^T` of `a` into `values` (the analysis `s` of its pattern):
+/// `Ok(Err(pivot))` at the first non-positive pivot.
+pub fn numeric_llt(
+    s: &SymbolicCholesky<usize>,
+    a: &SparseColMat<usize, f64>,
+    values: &mut [f64],
+) -> Result<Result<(), usize>, FactorError> {
+    let mut mem = workspace(s.factorize_numeric_llt_scratch::<f64>(par(), Default::default()))?;
+    Ok(s.factorize_numeric_llt(
+        values,
+        a.as_ref(),
+        Side::Lower,
+        Default::default(),
+        par(),
+        MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .map(|_| ())
+    .map_err(|e| match e {
+        faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => index,
+    }))
+}
+
 /// Numeric Cholesky with a symbolic analysis of the same pattern, refused
 /// when its estimate ([`cholesky_bytes`]) exceeds `budget`
 /// ([`check_memory`]); an allocation that fails is an error too.
@@ -229,28 +268,8 @@ pub fn cholesky_with(
 ) -> Result<Factor, FactorError> {
     let s = symbolic;
     check_memory(|| factor_what("Cholesky", s), cholesky_bytes(s), budget)?;
-    let mut values = Vec::new();
-    values
-        .try_reserve_exact(s.len_val())
-        .map_err(|_| FactorError::allocation(factor_what("Cholesky", s), 8 * s.len_val()))?;
-    values.resize(s.len_val(), 0.0);
-    let req = s.factorize_numeric_llt_scratch::<f64>(par(), Default::default());
-    let mut mem =
-        MemBuffer::try_new(req).map_err(|_| FactorError::allocation("the Cholesky workspace", req.size_bytes()))?;
-    s.factorize_numeric_llt(
-        &mut values,
-        a.as_ref(),
-        Side::Lower,
-        Default::default(),
-        par(),
-        MemStack::new(&mut mem),
-        Default::default(),
-    )
-    .map_err(|e| match e {
-        faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => {
-            FactorError::NotPositiveDefinite { pivot: index }
-        }
-    })?;
+    let mut values = factor_values(s, || factor_what("Cholesky", s))?;
+    numeric_llt(s, a, &mut values)?.map_err(|pivot| FactorError::NotPositiveDefinite { pivot })?;
     Ok(Factor {
         symbolic: s.clone(),
         values,

@@ -183,28 +183,8 @@ impl Factorisation {
             }
             Symbolic::Cholesky(s) => s,
         };
-        let mut values = Vec::new();
-        values
-            .try_reserve_exact(s.len_val())
-            .map_err(|_| FactorError::allocation(e.what.clone(), 8 * s.len_val()))?;
-        values.resize(s.len_val(), 0.0);
-        let workspace = |req: faer::dyn_stack::StackReq| {
-            MemBuffer::try_new(req)
-                .map_err(|_| FactorError::allocation("the factorisation's workspace", req.size_bytes()))
-        };
-        let llt = {
-            let mut mem = workspace(s.factorize_numeric_llt_scratch::<f64>(par(), Default::default()))?;
-            s.factorize_numeric_llt(
-                &mut values,
-                a.as_ref(),
-                Side::Lower,
-                Default::default(),
-                par(),
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .is_ok()
-        };
+        let mut values = linalg::factor_values(s, || e.what.clone())?;
+        let llt = linalg::numeric_llt(s, a, &mut values)?.is_ok();
         if llt && values.iter().all(|v| v.is_finite()) {
             return Ok(Factorisation {
                 kind: Factor::Cholesky(s.clone(), values),
@@ -213,7 +193,7 @@ impl Factorisation {
             });
         }
         let ldlt = {
-            let mut mem = workspace(s.factorize_numeric_ldlt_scratch::<f64>(par(), Default::default()))?;
+            let mut mem = linalg::workspace(s.factorize_numeric_ldlt_scratch::<f64>(par(), Default::default()))?;
             s.factorize_numeric_ldlt(
                 &mut values,
                 a.as_ref(),
