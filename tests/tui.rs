@@ -8,6 +8,21 @@ use mpmlab::tui::draw::draw;
 use ratatui::backend::TestBackend;
 use ratatui::Terminal;
 
+/// The sweep view drawn at `w x h`, rows joined by newlines.
+fn sweep_screen(view: &mpmlab::tui::sweep::SweepView, w: u16, h: u16) -> String {
+    let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+    t.draw(|f| mpmlab::tui::sweep::draw(f, view)).unwrap();
+    let buf = t.backend().buffer().clone();
+    (0..buf.area.height)
+        .map(|y| {
+            (0..buf.area.width)
+                .map(|x| buf[(x, y)].symbol().to_string())
+                .collect::<String>()
+                + "\n"
+        })
+        .collect()
+}
+
 fn screen(app: &App) -> Vec<String> {
     screen_at(app, 100, 30)
 }
@@ -186,7 +201,7 @@ fn dynamics_screen_shows_time_energies_and_runs_on() {
 #[test]
 fn sweep_view_shows_runs_and_charts() {
     use mpmlab::sweep::RunResult;
-    use mpmlab::tui::sweep::{draw as draw_sweep, SweepView};
+    use mpmlab::tui::sweep::SweepView;
     // Three refinements of a first-order method and one failed run.
     let run = |h: f64, e: f64, t: f64, ok: bool| RunResult {
         id: format!("h={h}"),
@@ -214,13 +229,8 @@ fn sweep_view_shows_runs_and_charts() {
         scroll: 0,
         show_legend: true,
     };
-    let mut t = Terminal::new(TestBackend::new(100, 30)).unwrap();
-    t.draw(|f| draw_sweep(f, &view)).unwrap();
-    let buf = t.backend().buffer().clone();
-    let lines: Vec<String> = (0..buf.area.height)
-        .map(|y| (0..buf.area.width).map(|x| buf[(x, y)].symbol().to_string()).collect())
-        .collect();
-    let all = lines.join("\n");
+    let all = sweep_screen(&view, 100, 30);
+    let lines: Vec<&str> = all.lines().collect();
     assert!(lines[0].contains("4 runs, 3 completed, 1 failed"), "{}", lines[0]);
     assert!(all.contains("fails at 3") && all.contains("h=0.25"), "{all}");
     assert!(all.contains("stress_l2 against wall time"), "{all}");
@@ -253,17 +263,7 @@ fn sweep_view_shows_runs_and_charts() {
         show_legend: true,
     };
     for (w, hgt) in [(100, 30), (160, 48)] {
-        let mut t = Terminal::new(TestBackend::new(w, hgt)).unwrap();
-        t.draw(|f| draw_sweep(f, &estimated)).unwrap();
-        let buf = t.backend().buffer().clone();
-        let all: String = (0..buf.area.height)
-            .map(|y| {
-                (0..buf.area.width)
-                    .map(|x| buf[(x, y)].symbol().to_string())
-                    .collect::<String>()
-                    + "\n"
-            })
-            .collect();
+        let all = sweep_screen(&estimated, w, hgt);
         assert!(all.contains("error estimates at h = 0.125"), "{all}");
         let row = all
             .lines()
@@ -292,17 +292,7 @@ fn sweep_view_shows_runs_and_charts() {
         scroll: 0,
         show_legend: true,
     };
-    let mut t = Terminal::new(TestBackend::new(160, 48)).unwrap();
-    t.draw(|f| draw_sweep(f, &view)).unwrap();
-    let buf = t.backend().buffer().clone();
-    let all: String = (0..buf.area.height)
-        .map(|y| {
-            (0..buf.area.width)
-                .map(|x| buf[(x, y)].symbol().to_string())
-                .collect::<String>()
-                + "\n"
-        })
-        .collect();
+    let all = sweep_screen(&view, 160, 48);
     assert!(
         all.contains("displacement_l2 (lines) and cond(K) (dots) against delta_over_h"),
         "{all}"
