@@ -24,7 +24,7 @@
 //!    or energy explode is a [`StepFailure::Diverged`], non-finite values a
 //!    [`StepFailure::NonFinite`]: the state stays at the last good step.
 
-use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::assembly::{Dof, DofMap, Mapping, Pattern, Storage};
 use crate::bulk::blocks_of;
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
@@ -43,8 +43,25 @@ pub use crate::report::{Conditioning, DynamicsReport};
 /// A factorised mass matrix on the free dofs.
 enum MassSolver {
     Lumped(Vec<f64>),
-    /// The factor and the matrix (lower triangle).
-    Consistent(Factor, SparseColMat<usize, f64>),
+    /// The consistent mass as scalar parts ([`ScalarMass`]): one shared
+    /// by both components when every active node has both free or both
+    /// held, else one per component.
+    Consistent(Vec<ScalarMass>),
+}
+
+/// The consistent (or stabilised) mass is `M_s (x) I_2` (G (9), (20): the
+/// same scalar weights for x and y, ghost term included), so it is
+/// assembled and factorised once as the scalar `M_s` on the nodes whose
+/// component is free, and solved for the components that share those
+/// nodes as columns of one right-hand side.
+struct ScalarMass {
+    /// `L L^T` of `M_s` on this part's nodes.
+    factor: Factor,
+    /// `M_s` (lower triangle), for the kinetic energy.
+    matrix: SparseColMat<usize, f64>,
+    /// Per component solved with this part, the free dof of the 2D system
+    /// of each scalar unknown (length `M_s.nrows()` each).
+    components: Vec<Vec<usize>>,
 }
 
 impl MassSolver {
@@ -53,23 +70,79 @@ impl MassSolver {
         x.clear();
         match self {
             MassSolver::Lumped(d) => x.extend(b.iter().zip(d).map(|(b, d)| b / d)),
-            MassSolver::Consistent(f, _) => x.extend(linalg::solve(f, b)),
+            MassSolver::Consistent(parts) => {
+                x.resize(b.len(), 0.0);
+                for part in parts {
+                    let n = part.matrix.nrows();
+                    let mut rhs = faer::Mat::<f64>::from_fn(n, part.components.len(), |i, j| b[part.components[j][i]]);
+                    part.factor.solve_in_place(&mut rhs);
+                    for (j, dofs) in part.components.iter().enumerate() {
+                        for (i, &d) in dofs.iter().enumerate() {
+                            x[d] = rhs[(i, j)];
+                        }
+                    }
+                }
+            }
         }
     }
 
     fn solve(&self, b: &[f64]) -> Vec<f64> {
-        match self {
-            MassSolver::Lumped(d) => b.iter().zip(d).map(|(b, d)| b / d).collect(),
-            MassSolver::Consistent(f, _) => linalg::solve(f, b),
-        }
+        let mut x = Vec::new();
+        self.solve_into(b, &mut x);
+        x
     }
 
     /// `v.M v / 2`: the kinetic energy of grid velocities `v` (J).
     fn energy(&self, v: &[f64]) -> f64 {
         match self {
             MassSolver::Lumped(d) => 0.5 * v.iter().zip(d).map(|(v, d)| d * v * v).sum::<f64>(),
-            MassSolver::Consistent(_, m) => 0.5 * dot(v, &linalg::sym_lower_mul(m, v)),
+            MassSolver::Consistent(parts) => parts
+                .iter()
+                .flat_map(|part| {
+                    part.components.iter().map(|dofs| {
+                        let vc: Vec<f64> = dofs.iter().map(|&d| v[d]).collect();
+                        0.5 * dot(&vc, &linalg::sym_lower_mul(&part.matrix, &vc))
+                    })
+                })
+                .sum(),
         }
+    }
+}
+
+/// The scalar parts of the consistent mass on `dofs`: per part, a scalar
+/// numbering of nodes (a [`DofMap`] whose x component is the scalar
+/// unknown, y inactive) and, per component it serves, the 2D free dof of
+/// each scalar unknown. One part when every node has the same components
+/// free, else one per component (a roller holds one of them).
+fn scalar_parts(dofs: &DofMap) -> Vec<(DofMap, Vec<Vec<usize>>)> {
+    let free = |d: Dof| matches!(d, Dof::Free(_));
+    let shared = dofs.node_dof.iter().all(|d| free(d[0]) == free(d[1]));
+    // The nodes whose component `c` is free, numbered in node order, with
+    // the 2D free dof of each component in `cs`.
+    let numbering = |c: usize, cs: &[usize]| {
+        let mut map = DofMap {
+            node_dof: vec![[Dof::Inactive; 2]; dofs.node_dof.len()],
+            ..DofMap::default()
+        };
+        let mut of = vec![Vec::new(); cs.len()];
+        for (n, d) in dofs.node_dof.iter().enumerate() {
+            if free(d[c]) {
+                map.node_dof[n][0] = Dof::Free(map.n_free);
+                map.n_free += 1;
+                for (k, &c) in cs.iter().enumerate() {
+                    if let Dof::Free(i) = d[c] {
+                        of[k].push(i);
+                    }
+                }
+            }
+        }
+        map.active_nodes = map.n_free;
+        (map, of)
+    };
+    if shared {
+        vec![numbering(0, &[0, 1])]
+    } else {
+        vec![numbering(0, &[0]), numbering(1, &[1])]
     }
 }
 
@@ -117,9 +190,12 @@ impl<'a> PointsOnGrid<'a> {
     }
 }
 
-/// The reduced consistent mass plus `gamma_m J_G` (lower triangle).
+/// The reduced consistent mass plus `gamma_m J_G` (lower triangle) on
+/// `dofs` (the step's 2D numbering, or a scalar part's from
+/// [`scalar_parts`]).
 fn consistent_mass(
     map: &Mapping,
+    dofs: &DofMap,
     pattern: &Pattern,
     blocks: &[&[usize]],
     faces: &[GhostFace],
@@ -128,7 +204,7 @@ fn consistent_mass(
 ) -> Result<SparseColMat<usize, f64>, linalg::FactorError> {
     let ng = map.groups.len();
     Ok(pattern
-        .assemble_with(&map.dofs, blocks, |b, out| {
+        .assemble_with(dofs, blocks, |b, out| {
             if b < ng {
                 group_mass(map, b, points, out)
             } else {
@@ -136,6 +212,53 @@ fn consistent_mass(
             }
         })?
         .0)
+}
+
+/// Pattern and symbolic Cholesky of each scalar part (values only give the
+/// structure here).
+fn analyse_parts(
+    map: &Mapping,
+    parts: &[(DofMap, Vec<Vec<usize>>)],
+    blocks: &[&[usize]],
+    faces: &[GhostFace],
+    points: &PointsOnGrid,
+) -> Result<Vec<(Pattern, linalg::CholeskySymbolic)>, linalg::FactorError> {
+    parts
+        .iter()
+        .map(|(dofs, _)| {
+            let pattern = Pattern::new(dofs, blocks, Storage::Lower)?;
+            let m = consistent_mass(map, dofs, &pattern, blocks, faces, points, 1.0)?;
+            Ok((pattern, linalg::cholesky_symbolic(&m)?))
+        })
+        .collect()
+}
+
+/// Assemble `M_s + gamma_m J_G` of each scalar part on its analysis and
+/// factorise it (refused beyond `budget` bytes, [`linalg::check_memory`]).
+#[allow(clippy::too_many_arguments)]
+fn factorise_parts(
+    map: &Mapping,
+    parts: Vec<(DofMap, Vec<Vec<usize>>)>,
+    analyses: &[(Pattern, linalg::CholeskySymbolic)],
+    blocks: &[&[usize]],
+    faces: &[GhostFace],
+    points: &PointsOnGrid,
+    gamma_m: f64,
+    budget: u64,
+) -> Result<Vec<ScalarMass>, linalg::FactorError> {
+    parts
+        .into_iter()
+        .zip(analyses)
+        .map(|((dofs, components), (pattern, symbolic))| {
+            let matrix = consistent_mass(map, &dofs, pattern, blocks, faces, points, gamma_m)?;
+            let factor = linalg::cholesky_with(symbolic, &matrix, budget)?;
+            Ok(ScalarMass {
+                factor,
+                matrix,
+                components,
+            })
+        })
+        .collect()
 }
 
 /// The lumped mass on the free dofs.
@@ -211,32 +334,26 @@ fn factorise_mass(
     cached: &[[crate::basis::Weights1d; 2]],
 ) -> Result<(MassSolver, bool), StepFailure> {
     let blocks = blocks_of(map, faces);
+    let parts = scalar_parts(&map.dofs);
     let cache = &sim.mass_cache;
-    let reused = cache.pattern.is_some()
+    let reused = cache.parts.len() == parts.len()
         && cache.key.len() == blocks.len()
         && cache.key.iter().zip(&blocks).all(|(k, b)| k.as_slice() == *b);
     if !reused {
         let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
-        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower).map_err(|e| e.at_step(step))?;
-        // The symbolic analysis needs values only for the structure.
         let points = PointsOnGrid {
             cached,
             ..PointsOnGrid::of(sim)
         };
-        let m = consistent_mass(map, &pattern, &blocks, faces, &points, 1.0).map_err(|e| e.at_step(step))?;
-        let symbolic = linalg::cholesky_symbolic(&m).map_err(|e| match e {
+        let analyses = analyse_parts(map, &parts, &blocks, faces, &points).map_err(|e| match e {
             e @ linalg::FactorError::Memory { .. } => e.at_step(step),
             e => StepFailure::Singular {
                 step,
                 reason: format!("mass matrix: {e}"),
             },
         })?;
-        sim.mass_cache = MassCache {
-            key,
-            pattern: Some((pattern, symbolic)),
-        };
+        sim.mass_cache = MassCache { key, parts: analyses };
     }
-    let (pattern, symbolic) = sim.mass_cache.pattern.as_ref().expect("set above");
     let gamma = if kind == MassKind::Stabilised {
         sim.params.gamma_m
     } else {
@@ -246,8 +363,8 @@ fn factorise_mass(
         cached,
         ..PointsOnGrid::of(sim)
     };
-    let m = consistent_mass(map, pattern, &blocks, faces, &points, gamma).map_err(|e| e.at_step(step))?;
-    let factor = linalg::cholesky_with(symbolic, &m, sim.model.max_memory).map_err(|e| match e {
+    let analyses = &sim.mass_cache.parts;
+    let parts = factorise_parts(map, parts, analyses, &blocks, faces, &points, gamma, sim.model.max_memory).map_err(|e| match e {
         e @ linalg::FactorError::Memory { .. } => e.at_step(step),
         e => StepFailure::Singular {
         step,
@@ -272,7 +389,7 @@ fn factorise_mass(
         ),
     },
     })?;
-    Ok((MassSolver::Consistent(factor, m), reused))
+    Ok((MassSolver::Consistent(parts), reused))
 }
 
 /// One explicit step (see the module's documentation), with the buffers
@@ -740,8 +857,8 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
     let blocks = blocks_of(map, faces);
     let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower)?;
     let points = PointsOnGrid::of(sim);
-    let mc = consistent_mass(map, &pattern, &blocks, faces, &points, 0.0)?;
-    let ms = consistent_mass(map, &pattern, &blocks, faces, &points, sim.params.gamma_m)?;
+    let mc = consistent_mass(map, &map.dofs, &pattern, &blocks, faces, &points, 0.0)?;
+    let ms = consistent_mass(map, &map.dofs, &pattern, &blocks, faces, &points, sim.params.gamma_m)?;
     let (cond_c, fact_c) = spd_condition(&mc, mode, limit);
     let (cond_s, fact_s) = spd_condition(&ms, mode, limit);
     let lumped = lumped_mass(map, masses);
@@ -827,17 +944,14 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
         MassSolver::Lumped(lumped_mass(&map, &pts.mass))
     } else {
         let blocks = blocks_of(&map, &faces);
-        let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower).map_err(|e| e.to_string())?;
-        let m = consistent_mass(
-            &map,
-            &pattern,
-            &blocks,
-            &faces,
-            &PointsOnGrid::of(sim),
-            sim.params.gamma_m,
+        let parts = scalar_parts(&map.dofs);
+        let points = PointsOnGrid::of(sim);
+        let analyses = analyse_parts(&map, &parts, &blocks, &faces, &points).map_err(|e| e.to_string())?;
+        let gamma = sim.params.gamma_m;
+        MassSolver::Consistent(
+            factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX)
+                .map_err(|e| e.to_string())?,
         )
-        .map_err(|e| e.to_string())?;
-        MassSolver::Consistent(linalg::cholesky(&m).map_err(|e| e.to_string())?, m)
     };
     let v = scatter(&map, &map_velocities(&map, &solver, &pts.mass, &pts.v));
     Ok((0..v.len())

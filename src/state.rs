@@ -455,5 +455,7 @@ pub(crate) fn check_points(
 #[derive(Default)]
 pub(crate) struct MassCache {
     pub(crate) key: Vec<Vec<usize>>,
-    pub(crate) pattern: Option<(crate::assembly::Pattern, crate::linalg::CholeskySymbolic)>,
+    /// Per scalar part of the mass (one, or one per component), its
+    /// pattern and symbolic Cholesky; empty before the first step.
+    pub(crate) parts: Vec<(crate::assembly::Pattern, crate::linalg::CholeskySymbolic)>,
 }
