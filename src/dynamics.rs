@@ -418,6 +418,9 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
         a.mass
     };
     let grid = &sim.model.grid;
+    // Threads pay for themselves above a few thousand points.
+    let pool = sim.pool.clone().filter(|_| sim.state.points.len() >= 4096);
+    let pool = pool.as_deref();
     let Workspace {
         transfer: tr,
         map,
@@ -494,7 +497,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
         tr.nodal_a.iter_mut().for_each(|v| *v = [0.0; 2]);
     }
     let gravity = sim.model.gravity;
-    let first = tr.stress_pass(grid, pts, &bodies, gravity, true, usf);
+    let first = tr.stress_pass(grid, pts, &bodies, gravity, true, usf, pool);
     // The free-dof internal force, then f_ext: body forces, point loads
     // and tractions in that order (as `Simulation::nodal_forces`).
     transfer::gather_into(&map.dofs, &tr.fint, fint);
@@ -549,7 +552,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
             let (du, v) = (&mut tr.nodal_a, &tr.nodal_b);
             du.clear();
             du.extend(v.iter().map(|v| [dt * v[0], dt * v[1]]));
-            tr.stress_pass(grid, pts, &bodies, gravity, false, true)
+            tr.stress_pass(grid, pts, &bodies, gravity, false, true, pool)
         }
         StressUpdate::Musl => {
             // Sulsky's modified USL: the strain increment from the updated
@@ -562,7 +565,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
             transfer::gather_into(&map.dofs, &tr.momentum, bm);
             mass.solve_into(bm, vm);
             transfer::scatter_into(&map.dofs, vm, Some(dt), &mut tr.nodal_a);
-            tr.stress_pass(grid, pts, &bodies, gravity, false, true)
+            tr.stress_pass(grid, pts, &bodies, gravity, false, true, pool)
         }
     };
     let (strain, dissipation) = (committed.strain, committed.dissipation);
@@ -1044,7 +1047,10 @@ mass = "stabilised"
             }
             let e = solver.energy(&v);
             let e_ref = 0.5 * dot(&reference, &linalg::sym_lower_mul(&m, &reference));
-            assert!((e - e_ref).abs() <= 1e-12 * e_ref, "roller {roller}: energy {e} vs {e_ref}");
+            assert!(
+                (e - e_ref).abs() <= 1e-12 * e_ref,
+                "roller {roller}: energy {e} vs {e_ref}"
+            );
         }
     }
 }

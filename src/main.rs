@@ -98,13 +98,17 @@ enum Cmd {
         /// k, M, G, T); default half of the available memory.
         #[arg(long, value_name = "SIZE", value_parser = parse_size)]
         max_memory: Option<u64>,
+        /// Explicit dynamics: threads for the points' material updates (0:
+        /// one per core; default 1). Results are the same to the bit.
+        #[arg(long, value_name = "N")]
+        threads: Option<usize>,
         /// Start from a checkpoint of this scene (`run --checkpoint`, or `w`
         /// in the TUI) and step on, with other parameters if you like: the
         /// recording is the branch, and says where it started.
         #[arg(long, value_name = "FILE")]
         resume: Option<PathBuf>,
         /// Show a sweep folder instead (table, error against time and h).
-        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory", "record_every", "record_dt", "record_fields", "resume"])]
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "record", "no_record", "force", "max_memory", "record_every", "record_dt", "record_fields", "resume", "threads"])]
         sweep: Option<PathBuf>,
     },
 }
@@ -145,6 +149,11 @@ struct RunArgs {
     cadence: RecordArgs,
     #[command(flatten)]
     vtk: VtkArgs,
+    /// Explicit dynamics: threads for the points' material updates (0:
+    /// one per core; default 1). Results are the same to the bit for any
+    /// count. Sweeps run one scene per core instead.
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
     /// Print only the summary.
     #[arg(long)]
     quiet: bool,
@@ -295,6 +304,7 @@ fn main() -> ExitCode {
             force,
             cadence,
             max_memory,
+            threads,
             resume,
             sweep: None,
         }) => tui(
@@ -304,6 +314,7 @@ fn main() -> ExitCode {
             force,
             &cadence,
             &limits(max_memory),
+            threads,
             resume.as_deref(),
         ),
         None => tui(
@@ -314,6 +325,7 @@ fn main() -> ExitCode {
             &RecordArgs::default(),
             &Limits::default(),
             None,
+            None,
         ),
     };
     match result {
@@ -321,6 +333,30 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
+        }
+    }
+}
+
+/// `--threads`: start them, say so (unless `quiet`), or exit 2 naming why not.
+fn use_threads(sim: &mut Simulation, threads: Option<usize>, quiet: bool) -> Result<(), ExitCode> {
+    let Some(n) = threads else { return Ok(()) };
+    match sim.set_threads(n) {
+        Ok(k) if !quiet => {
+            let explicit = sim.model().analysis.kind == mpmlab::scene::AnalysisKind::ExplicitDynamics;
+            println!(
+                "threads: {k} for the points' material updates{}",
+                if explicit {
+                    ""
+                } else {
+                    " (explicit dynamics only: this analysis runs on one)"
+                }
+            );
+            Ok(())
+        }
+        Ok(_) => Ok(()),
+        Err(e) => {
+            eprintln!("error: --threads: {e}");
+            Err(ExitCode::from(2))
         }
     }
 }
@@ -697,6 +733,9 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         Ok(s) => s,
         Err(code) => return Ok(code),
     };
+    if let Err(code) = use_threads(&mut sim, args.threads, quiet) {
+        return Ok(code);
+    }
     if let Some(file) = &args.resume {
         match sim.resume_from(file, &text) {
             Ok(step) => out!("resumed from {} at step {step}", file.display()),
@@ -1536,6 +1575,7 @@ fn tui(
     force: bool,
     cadence: &RecordArgs,
     limits: &Limits,
+    threads: Option<usize>,
     resume: Option<&Path>,
 ) -> Result<ExitCode> {
     if resume.is_some() && scene.is_none() {
@@ -1577,6 +1617,9 @@ fn tui(
             }
         },
     };
+    if let Err(code) = use_threads(&mut sim, threads, true) {
+        return Ok(code);
+    }
     if let Some(file) = resume {
         if let Err(e) = sim.resume_from(file, &text) {
             eprintln!("error: {e}");

@@ -73,6 +73,9 @@ pub struct Simulation {
     pub(crate) mass_cache: MassCache,
     /// Explicit dynamics: the step's buffers, reused from step to step.
     pub(crate) explicit: crate::dynamics::transfer::Workspace,
+    /// Threads for the explicit step's per-point passes
+    /// ([`Simulation::set_threads`]); `None`: one.
+    pub(crate) pool: Option<std::sync::Arc<rayon::ThreadPool>>,
     /// The observer's progress hook (behind a mutex so steps can call it
     /// through `&self`).
     progress: Option<std::sync::Mutex<ProgressHook>>,
@@ -117,6 +120,7 @@ impl Simulation {
             state,
             mass_cache: Default::default(),
             explicit: Default::default(),
+            pool: None,
             progress: None,
             cancel: None,
         }
@@ -280,6 +284,33 @@ impl Simulation {
     /// ([`StepFailure::Cancelled`]), also where no residual is computed.
     pub fn set_cancel(&mut self, flag: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>) {
         self.cancel = flag;
+    }
+
+    /// Run the explicit step's material updates (the stress passes) on
+    /// `threads` threads; 0 means one per core, 1 (the default) none. The
+    /// results are the same to the bit whatever the count: each point is
+    /// updated on its own, and forces and energies are summed in point
+    /// order afterwards. Other phases, and quasi-static analyses, stay on
+    /// one thread. Returns the threads in use, or why they could not be
+    /// started.
+    pub fn set_threads(&mut self, threads: usize) -> Result<usize, String> {
+        if threads == 1 {
+            self.pool = None;
+            return Ok(1);
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("mpmlab-points-{i}"))
+            .build()
+            .map_err(|e| format!("cannot start {threads} threads: {e}"))?;
+        let n = pool.current_num_threads();
+        self.pool = (n > 1).then(|| std::sync::Arc::new(pool));
+        Ok(n)
+    }
+
+    /// The threads the explicit step's material updates run on.
+    pub fn threads(&self) -> usize {
+        self.pool.as_ref().map_or(1, |p| p.current_num_threads())
     }
 
     /// Whether the observer's stop flag is set.

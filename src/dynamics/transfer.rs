@@ -90,6 +90,8 @@ pub(crate) struct Transfer {
     grouped: Vec<(u32, u32, u8, u8)>,
     /// The points after the step (only the fields a step changes).
     pub(crate) next: Points,
+    /// Per point, its stress pass result when the pass runs in parallel.
+    per_point: Vec<PointStress>,
 }
 
 /// The key of a point in no group (no volume).
@@ -209,6 +211,202 @@ pub(crate) struct Moved {
     /// `sum_p 1/2 m_p |v_p|^2` (J) and `sum_p m_p v_p` (kg m/s) after the step.
     pub(crate) kinetic: f64,
     pub(crate) momentum: P2,
+}
+
+/// One point's result of the stress pass: its first Piola-Kirchhoff
+/// stress `P = tau dF^-T` (Pa; `None` for a point without reference
+/// volume), the Frobenius `|dF - I|` of its increment and, committed,
+/// its strain energy `V0 psi(b_e)` (J).
+#[derive(Clone, Copy, Debug, Default)]
+struct PointStress {
+    pk: Option<[[f64; 2]; 2]>,
+    stretch: f64,
+    energy: f64,
+}
+
+/// The next points' fields a stress pass writes, as slices (so chunks of
+/// points can be written in parallel).
+struct NextSlices<'a> {
+    def_grad: &'a mut [[f64; 4]],
+    vol: &'a mut [f64],
+    lp: &'a mut [P2],
+    stress: &'a mut [[f64; 3]],
+    szz: &'a mut [f64],
+    b_e: &'a mut [[f64; 4]],
+    dissipation: &'a mut [f64],
+    yielding: &'a mut [bool],
+}
+
+impl<'a> NextSlices<'a> {
+    fn of(next: &'a mut Points) -> NextSlices<'a> {
+        NextSlices {
+            def_grad: &mut next.def_grad,
+            vol: &mut next.vol,
+            lp: &mut next.lp,
+            stress: &mut next.stress,
+            szz: &mut next.szz,
+            b_e: &mut next.b_e,
+            dissipation: &mut next.dissipation,
+            yielding: &mut next.yielding,
+        }
+    }
+
+    /// The first `mid` points and the rest.
+    fn split_at_mut(self, mid: usize) -> (NextSlices<'a>, NextSlices<'a>) {
+        let (def_grad, d2) = self.def_grad.split_at_mut(mid);
+        let (vol, v2) = self.vol.split_at_mut(mid);
+        let (lp, l2) = self.lp.split_at_mut(mid);
+        let (stress, s2) = self.stress.split_at_mut(mid);
+        let (szz, z2) = self.szz.split_at_mut(mid);
+        let (b_e, b2) = self.b_e.split_at_mut(mid);
+        let (dissipation, di2) = self.dissipation.split_at_mut(mid);
+        let (yielding, y2) = self.yielding.split_at_mut(mid);
+        (
+            NextSlices {
+                def_grad,
+                vol,
+                lp,
+                stress,
+                szz,
+                b_e,
+                dissipation,
+                yielding,
+            },
+            NextSlices {
+                def_grad: d2,
+                vol: v2,
+                lp: l2,
+                stress: s2,
+                szz: z2,
+                b_e: b2,
+                dissipation: di2,
+                yielding: y2,
+            },
+        )
+    }
+}
+
+/// The nodal forces a stress pass accumulates: internal forces and, with
+/// `gravity` (m/s^2), body forces; `None` when the pass only commits.
+struct Forces<'a> {
+    fint: &'a mut Vec<P2>,
+    body_force: &'a mut Vec<P2>,
+    gravity: Option<P2>,
+}
+
+/// Point `p`'s material update from the nodal increments `du` (`dt v`, m):
+/// `dF = I + sum du (x) grad S`, the Hencky/von Mises response and, with
+/// `commit`, its updated `F`, `V`, GIMP domain, stresses, `b_e`,
+/// dissipation into `next[i]` (as [`crate::kinematics::commit_point`]).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn update_point(
+    grid: &Grid,
+    pts: &Points,
+    bodies: &Bodies,
+    du: &[P2],
+    p: usize,
+    commit: bool,
+    next: &mut NextSlices,
+    i: usize,
+) -> PointStress {
+    let body = pts.body[p];
+    let w = bodies.weights(grid, pts, p);
+    let mut g = [[0.0; 2]; 2];
+    for_each_node(grid, &w, |n, _, dw| {
+        let v = du[n];
+        for i in 0..2 {
+            for j in 0..2 {
+                g[i][j] += v[i] * dw[j];
+            }
+        }
+    });
+    let df = Matrix2::new(1.0 + g[0][0], g[0][1], g[1][0], 1.0 + g[1][1]);
+    let (vol0, material) = (pts.vol0[p], &bodies.material[body]);
+    let r = (vol0 != 0.0).then(|| material.respond_stress(&df, &be_matrix(pts.b_e[p])));
+    let mut out = PointStress {
+        pk: r
+            .as_ref()
+            .map(|r| [[r.p[(0, 0)], r.p[(0, 1)]], [r.p[(1, 0)], r.p[(1, 1)]]]),
+        stretch: 0.0,
+        energy: 0.0,
+    };
+    if !commit {
+        return out;
+    }
+    out.stretch = (df - Matrix2::identity()).norm();
+    let fo = pts.def_grad[p];
+    let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
+    next.def_grad[i] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
+    next.vol[i] = pts.vol[p] * df.determinant();
+    let (l0, u) = (pts.lp0[p], right_stretch(&f));
+    next.lp[i] = [l0[0] * u[(0, 0)], l0[1] * u[(1, 1)]];
+    match r {
+        Some(r) => {
+            let s = r.tau / f.determinant();
+            next.stress[i] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
+            next.szz[i] = s[(2, 2)];
+            next.b_e[i] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
+            next.dissipation[i] = pts.dissipation[p] + r.dissipation * vol0;
+            next.yielding[i] = r.yielding;
+            out.energy = vol0 * material.stored_energy(&r.b_e);
+        }
+        None => {
+            next.stress[i] = pts.stress[p];
+            next.szz[i] = pts.szz[p];
+            next.b_e[i] = pts.b_e[p];
+            next.dissipation[i] = pts.dissipation[p];
+            next.yielding[i] = pts.yielding[p];
+        }
+    }
+    out
+}
+
+/// Point `p`'s share of the pass's sums, in point order: its internal and
+/// body forces into `forces`, and, committed, its `|dF - I|` against the
+/// largest so far, its strain energy and its dissipation (`dissipation[0]`,
+/// its next value).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn apply_point(
+    grid: &Grid,
+    pts: &Points,
+    bodies: &Bodies,
+    forces: &mut Forces,
+    p: usize,
+    ps: &PointStress,
+    commit: bool,
+    dissipation: &[f64],
+    out: &mut Committed,
+) {
+    if let Some(gravity) = forces.gravity {
+        let w = bodies.weights(grid, pts, p);
+        if let Some(pk) = &ps.pk {
+            let vol0 = pts.vol0[p];
+            for_each_node(grid, &w, |n, _, dw| {
+                for i in 0..2 {
+                    forces.fint[n][i] += (pk[i][0] * dw[0] + pk[i][1] * dw[1]) * vol0;
+                }
+            });
+        }
+        if gravity != [0.0; 2] && pts.vol[p] != 0.0 {
+            let m = pts.mass[p];
+            for_each_node(grid, &w, |n, w, _| {
+                forces.body_force[n][0] += w * m * gravity[0];
+                forces.body_force[n][1] += w * m * gravity[1];
+            });
+        }
+    }
+    if !commit {
+        return;
+    }
+    if !(ps.stretch <= out.strained.0) {
+        out.strained = (ps.stretch, p);
+    }
+    if ps.pk.is_some() {
+        out.strain += ps.energy;
+        out.dissipation += dissipation[0];
+    }
 }
 
 impl Transfer {
@@ -381,6 +579,7 @@ impl Transfer {
         gravity: P2,
         forces: bool,
         commit: bool,
+        pool: Option<&rayon::ThreadPool>,
     ) -> Committed {
         let nodes = grid.num_nodes();
         if forces {
@@ -394,70 +593,67 @@ impl Transfer {
             dissipation: 0.0,
             strained: (0.0, 0),
         };
-        let (du, fint, body_force, next) = (&self.nodal_a, &mut self.fint, &mut self.body_force, &mut self.next);
-        for p in 0..pts.len() {
-            let body = pts.body[p];
-            let w = bodies.weights(grid, pts, p);
-            let mut g = [[0.0; 2]; 2];
-            for_each_node(grid, &w, |n, _, dw| {
-                let v = du[n];
-                for i in 0..2 {
-                    for j in 0..2 {
-                        g[i][j] += v[i] * dw[j];
-                    }
+        let (du, fint, body_force) = (&self.nodal_a, &mut self.fint, &mut self.body_force);
+        let mut next = NextSlices::of(&mut self.next);
+        let mut forces = Forces {
+            fint,
+            body_force,
+            gravity: if forces { Some(gravity) } else { None },
+        };
+        match pool {
+            None => {
+                for p in 0..pts.len() {
+                    let ps = update_point(grid, pts, bodies, du, p, commit, &mut next, p);
+                    apply_point(
+                        grid,
+                        pts,
+                        bodies,
+                        &mut forces,
+                        p,
+                        &ps,
+                        commit,
+                        &next.dissipation[p..],
+                        &mut out,
+                    );
                 }
-            });
-            let df = Matrix2::new(1.0 + g[0][0], g[0][1], g[1][0], 1.0 + g[1][1]);
-            let (vol0, material) = (pts.vol0[p], &bodies.material[body]);
-            let r = (vol0 != 0.0).then(|| material.respond_stress(&df, &be_matrix(pts.b_e[p])));
-            if forces {
-                if let Some(r) = &r {
-                    let pk = [[r.p[(0, 0)], r.p[(0, 1)]], [r.p[(1, 0)], r.p[(1, 1)]]];
-                    for_each_node(grid, &w, |n, _, dw| {
-                        for i in 0..2 {
-                            fint[n][i] += (pk[i][0] * dw[0] + pk[i][1] * dw[1]) * vol0;
+            }
+            Some(pool) => {
+                // Each point's material update in parallel (its own next
+                // fields); then forces and sums in point order, so the
+                // result is the serial one to the bit.
+                let per = &mut self.per_point;
+                per.resize(pts.len(), PointStress::default());
+                let chunk = pts.len().div_ceil(8 * pool.current_num_threads()).max(1024);
+                pool.install(|| {
+                    use rayon::prelude::*;
+                    let mut jobs = Vec::new();
+                    let (mut rest, mut stresses, mut start) = (next, per.as_mut_slice(), 0);
+                    while start < pts.len() {
+                        let len = chunk.min(pts.len() - start);
+                        let (head, tail) = rest.split_at_mut(len);
+                        let (sh, st) = stresses.split_at_mut(len);
+                        jobs.push((start, head, sh));
+                        (rest, stresses, start) = (tail, st, start + len);
+                    }
+                    jobs.into_par_iter().for_each(|(start, mut next, stresses)| {
+                        for (i, ps) in stresses.iter_mut().enumerate() {
+                            *ps = update_point(grid, pts, bodies, du, start + i, commit, &mut next, i);
                         }
                     });
-                }
-                if gravity != [0.0; 2] && pts.vol[p] != 0.0 {
-                    let m = pts.mass[p];
-                    for_each_node(grid, &w, |n, w, _| {
-                        body_force[n][0] += w * m * gravity[0];
-                        body_force[n][1] += w * m * gravity[1];
-                    });
-                }
-            }
-            if !commit {
-                continue;
-            }
-            let stretch = (df - Matrix2::identity()).norm();
-            if !(stretch <= out.strained.0) {
-                out.strained = (stretch, p);
-            }
-            // As `kinematics::commit_point`, into the next state.
-            let fo = pts.def_grad[p];
-            let f = df * Matrix2::new(fo[0], fo[1], fo[2], fo[3]);
-            next.def_grad[p] = [f[(0, 0)], f[(0, 1)], f[(1, 0)], f[(1, 1)]];
-            next.vol[p] = pts.vol[p] * df.determinant();
-            let (l0, u) = (pts.lp0[p], right_stretch(&f));
-            next.lp[p] = [l0[0] * u[(0, 0)], l0[1] * u[(1, 1)]];
-            match r {
-                Some(r) => {
-                    let s = r.tau / f.determinant();
-                    next.stress[p] = [s[(0, 0)], s[(1, 1)], s[(0, 1)]];
-                    next.szz[p] = s[(2, 2)];
-                    next.b_e[p] = [r.b_e[(0, 0)], r.b_e[(1, 1)], r.b_e[(0, 1)], r.b_e[(2, 2)]];
-                    next.dissipation[p] = pts.dissipation[p] + r.dissipation * vol0;
-                    next.yielding[p] = r.yielding;
-                    out.strain += vol0 * material.stored_energy(&r.b_e);
-                    out.dissipation += next.dissipation[p];
-                }
-                None => {
-                    next.stress[p] = pts.stress[p];
-                    next.szz[p] = pts.szz[p];
-                    next.b_e[p] = pts.b_e[p];
-                    next.dissipation[p] = pts.dissipation[p];
-                    next.yielding[p] = pts.yielding[p];
+                });
+                let dissipation = &self.next.dissipation;
+                for p in 0..pts.len() {
+                    apply_point(
+                        grid,
+                        pts,
+                        bodies,
+                        &mut forces,
+                        p,
+                        &per[p],
+                        commit,
+                        &dissipation[p..],
+                        &mut out,
+                    );
                 }
             }
         }
