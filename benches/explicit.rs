@@ -8,7 +8,9 @@
 //! stabilised consistent mass, next to a minimal single-threaded kernel of
 //! the same physics written here (lumped mass, USF, FLIP, Hencky with a
 //! closed-form 2 x 2 eigen decomposition, structure-of-arrays points, no
-//! allocation per step), and their ratios, all measured in one run.
+//! allocation per step), and their ratios, all measured in one run; then
+//! the same two runs with the material updates on two threads
+//! (`--threads 2`) and their speed-ups.
 //!
 //! Then criterion's timings of one step of the plastic ghost collision
 //! (G 5.3: 4828 GIMP points, h = 0.05 m) with each mass matrix, and of the
@@ -73,8 +75,9 @@ fn block(mass: &str) -> Simulation {
 
 /// Seconds for `steps` steps of mpmlab on the block (one step first, out
 /// of the timing, so caches and buffers are warm as in a long run).
-fn time_mpmlab(mass: &str, steps: usize) -> (usize, f64) {
+fn time_mpmlab(mass: &str, steps: usize, threads: usize) -> (usize, f64) {
     let mut s = block(mass);
+    assert_eq!(s.set_threads(threads), Ok(threads));
     s.step().expect("first step");
     let t = Instant::now();
     for _ in 0..steps {
@@ -279,11 +282,13 @@ fn throughput() {
     let rate = |(n, s): (usize, f64)| (n * steps) as f64 / s;
     let (n, t_ref) = time_reference(steps);
     let reference = rate((n, t_ref));
-    let (n_l, t_l) = time_mpmlab("lumped", steps);
+    let (n_l, t_l) = time_mpmlab("lumped", steps, 1);
     let lumped = rate((n_l, t_l));
-    let (n_s, t_s) = time_mpmlab("stabilised", steps);
+    let (n_s, t_s) = time_mpmlab("stabilised", steps, 1);
     let stabilised = rate((n_s, t_s));
-    println!("explicit block, {n_l} points, {steps} steps of 1e-4 s (single thread):");
+    let (_, t_l2) = time_mpmlab("lumped", steps, 2);
+    let (_, t_s2) = time_mpmlab("stabilised", steps, 2);
+    println!("explicit block, {n_l} points, {steps} steps of 1e-4 s (single thread unless named):");
     println!(
         "  {:<28} {:>14} {:>10} {:>12}",
         "run", "point-steps/s", "s/step", "vs minimal"
@@ -292,6 +297,8 @@ fn throughput() {
         ("minimal kernel (lumped)", reference, t_ref),
         ("mpmlab lumped", lumped, t_l),
         ("mpmlab stabilised", stabilised, t_s),
+        ("mpmlab lumped, 2 threads", rate((n_l, t_l2)), t_l2),
+        ("mpmlab stabilised, 2 threads", rate((n_s, t_s2)), t_s2),
     ] {
         println!(
             "  {name:<28} {r:>14.3e} {:>10.4} {:>11.1}%",
@@ -300,6 +307,11 @@ fn throughput() {
         );
     }
     println!("  stabilised / lumped time: {:.2}x", t_s / t_l);
+    println!(
+        "  speed-up at 2 threads (--threads 2): lumped {:.2}x, stabilised {:.2}x",
+        t_l / t_l2,
+        t_s / t_s2
+    );
     assert_eq!((n, n_s), (n_l, n_l));
 }
 
