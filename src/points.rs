@@ -68,6 +68,33 @@ impl Points {
         self.v.shrink_to_fit();
     }
 
+    /// Room for `n` more points in every array, or the bytes that could not
+    /// be had (nothing is then reserved beyond what was).
+    pub fn try_reserve(&mut self, n: usize) -> Result<(), u64> {
+        let bytes = (n as u64).saturating_mul(Points::BYTES_PER_POINT);
+        let fail = |_| bytes;
+        self.x.try_reserve_exact(n).map_err(fail)?;
+        self.x0.try_reserve_exact(n).map_err(fail)?;
+        self.vol.try_reserve_exact(n).map_err(fail)?;
+        self.vol0.try_reserve_exact(n).map_err(fail)?;
+        self.mass.try_reserve_exact(n).map_err(fail)?;
+        self.stress.try_reserve_exact(n).map_err(fail)?;
+        self.strain.try_reserve_exact(n).map_err(fail)?;
+        self.lp.try_reserve_exact(n).map_err(fail)?;
+        self.body.try_reserve_exact(n).map_err(fail)?;
+        self.def_grad.try_reserve_exact(n).map_err(fail)?;
+        self.b_e.try_reserve_exact(n).map_err(fail)?;
+        self.szz.try_reserve_exact(n).map_err(fail)?;
+        self.dissipation.try_reserve_exact(n).map_err(fail)?;
+        self.yielding.try_reserve_exact(n).map_err(fail)?;
+        self.lp0.try_reserve_exact(n).map_err(fail)?;
+        self.v.try_reserve_exact(n).map_err(fail)?;
+        Ok(())
+    }
+
+    /// Bytes one point takes in every array.
+    pub const BYTES_PER_POINT: u64 = (2 * 16 + 3 * 8 + 2 * 24 + 16 + 8 + 2 * 32 + 2 * 8 + 1 + 16 + 16) as u64;
+
     /// Displacement since generation (m).
     pub fn displacement(&self, p: usize) -> P2 {
         [self.x[p][0] - self.x0[p][0], self.x[p][1] - self.x0[p][1]]

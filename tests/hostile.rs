@@ -1793,9 +1793,8 @@ fn memory_that_cannot_be_allocated_for_a_step_is_a_reported_failure() {
     // under `ulimit -v` below its peak: the step's big buffers (the
     // pattern, the matrix, the symbolic analysis, the factor and its
     // workspace) are reserved fallibly, so the step fails with exit 1 and
-    // `out of memory` instead of aborting. (Allocations while the model is
-    // built, or the per-point mapping, still abort under a tight enough
-    // limit: the build-time estimate is what guards them.)
+    // `out of memory` instead of aborting. (The points are reserved
+    // fallibly while the model is built: next test.)
     let dir = temp_path("hostile-ulimit", "d");
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join("column.toml");
@@ -1857,6 +1856,62 @@ fn memory_that_cannot_be_allocated_for_a_step_is_a_reported_failure() {
         "no limit between 0.75 and 0.95 of the {peak_mb} MB peak made the step fail"
     );
     eprintln!("{}", reported.join(""));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn points_that_cannot_be_allocated_name_their_field() {
+    // A valid lattice of 9e6 points (2.2 GB of point arrays) with the
+    // memory budget lifted, under `ulimit -v` 1.5 GB: the points are
+    // reserved fallibly before they are placed, so the scene is refused
+    // with exit 2 naming `body[0].lattice` and the bytes, not an abort.
+    let dir = temp_path("hostile-ulimit-points", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("lattice.toml");
+    std::fs::write(
+        &p,
+        r#"[scene]
+name = "lattice"
+description = "A lattice too large for the address space."
+[grid]
+origin = [0.0, 0.0]
+size = [2.0, 2.0]
+h = 0.01
+[[material]]
+name = "soft"
+E = 1000.0
+nu = 0.3
+density = 1000.0
+[[body]]
+name = "block"
+material = "soft"
+placement = "lattice"
+points_per_cell = 1
+lattice = [3000, 3000]
+region = { shape = "rectangle", min = [0.5, 0.5], max = [1.5, 1.5] }
+[analysis]
+kind = "explicit-dynamics"
+duration = 0.01
+load_steps = 1
+mass = "lumped"
+"#,
+    )
+    .unwrap();
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 1500000 && exec \"$0\" run --max-memory 1T \"$1\"")
+        .arg(env!("CARGO_BIN_EXE_mpmlab"))
+        .arg(&p)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("lattice.toml:18:")
+            && err.contains("field `body[0].lattice`")
+            && err.contains("cannot allocate 2.2 GB"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -50,7 +50,18 @@ pub(super) fn build(
                 ),
             ));
         }
-        budget.body(k, b, &region, grid)?;
+        let (most, field) = budget.body(k, b, &region, grid)?;
+        // The points are pushed one by one: reserve them first, so memory
+        // that cannot be had is this error, not an abort.
+        points.try_reserve(most).map_err(|bytes| {
+            FieldError::new(
+                field.clone(),
+                format!(
+                    "cannot allocate {} for up to {most} points of this body; use fewer points",
+                    crate::model::bytes(bytes)
+                ),
+            )
+        })?;
         let before = points.len();
         let density = materials[material].density();
         if b.placement == Placement::Polar {

@@ -247,7 +247,17 @@ impl Budget {
     /// nodes its region's bounding box covers; refuse it when the counts
     /// exceed the caps, the generation work is too large, or the estimate
     /// exceeds the budget.
-    pub(super) fn body(&mut self, k: usize, b: &BodySpec, region: &Region, grid: &Grid) -> Result<(), FieldError> {
+    /// Charge body `k`'s points (at most the cells its region's bounding
+    /// box covers times its points per cell, or its lattice or polar
+    /// count) and return that bound with the field that sets it, or the
+    /// field to change.
+    pub(super) fn body(
+        &mut self,
+        k: usize,
+        b: &BodySpec,
+        region: &Region,
+        grid: &Grid,
+    ) -> Result<(usize, String), FieldError> {
         let f = |n: &str| format!("body[{k}].{n}");
         let (min, max) = region.bounds();
         let h = grid.h;
@@ -313,6 +323,8 @@ impl Budget {
         self.points += count;
         // GIMP domains reach one node row further each way.
         self.active += (cx + 3) * (cy + 3);
-        self.check(field, advice)
+        self.check(field.clone(), advice)?;
+        // Below MAX_POINTS, checked above.
+        Ok((count as usize, field))
     }
 }
