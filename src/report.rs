@@ -147,11 +147,11 @@ impl StepReport {
     }
 
     /// What cutback `c` of this step halved, in words: `the increment of the
-    /// load factor 0.250000 -> 0.500000` or (explicit) `the time step
-    /// 1.000000e-3 s -> 2.000000e-3 s`.
+    /// load factor 0.250000 -> 0.500000` or (explicit, times in s as stored)
+    /// `the time step from t = 0.05 s to 0.1 s`.
     pub fn cutback_span(&self, c: &Cutback) -> String {
         if self.dynamics.is_some() {
-            format!("the time step {:.6e} s -> {:.6e} s", c.from, c.to)
+            format!("the time step from t = {} s to {} s", c.from, c.to)
         } else {
             format!("the increment of the load factor {:.6} -> {:.6}", c.from, c.to)
         }
