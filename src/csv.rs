@@ -155,6 +155,7 @@ pub fn columns(r: &StepReport, u: Units) -> Vec<(String, String)> {
                 "cond_mass_lumped".into(),
                 num(cond.map_or(f64::NAN, |c| c.mass_lumped.value)),
             ));
+            c.push(("cutbacks".into(), d.cutbacks.len().to_string()));
         }
         None => {
             c.push(("load_factor".into(), num(r.load_factor)));

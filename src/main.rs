@@ -677,18 +677,17 @@ impl Observer for Table {
             }
             out!("{}", if r.dynamics.is_some() { dynamics_row(r) } else { row(r) });
         }
-        for c in r.solver.iter().flat_map(|s| &s.cutbacks) {
+        for c in r.cutbacks() {
             out!(
-                "       cutback in step {}: the increment of the load factor {:.6} -> {:.6} failed and was halved: {}",
+                "       cutback in step {}: {} failed and was halved: {}",
                 r.step,
-                c.from,
-                c.to,
+                r.cutback_span(c),
                 c.reason
             );
         }
         self.total_time += r.timings.total;
         self.phases.add(&r.timings);
-        self.cutbacks += r.solver.as_ref().map_or(0, |s| s.cutbacks.len());
+        self.cutbacks += r.cutbacks().len();
         self.last = Some(r.clone());
         None
     }

@@ -134,6 +134,30 @@ pub struct StepReport {
     pub probes: Vec<crate::probe::ProbeValue>,
 }
 
+impl StepReport {
+    /// Every failed attempt of the step that was cut back, in order: the
+    /// Newton increments of a quasi-static step, the time steps of an
+    /// explicit one.
+    pub fn cutbacks(&self) -> &[Cutback] {
+        match (&self.solver, &self.dynamics) {
+            (Some(s), _) => &s.cutbacks,
+            (None, Some(d)) => &d.cutbacks,
+            (None, None) => &[],
+        }
+    }
+
+    /// What cutback `c` of this step halved, in words: `the increment of the
+    /// load factor 0.250000 -> 0.500000` or (explicit, times in s as stored)
+    /// `the time step from t = 0.05 s to 0.1 s`.
+    pub fn cutback_span(&self, c: &Cutback) -> String {
+        if self.dynamics.is_some() {
+            format!("the time step from t = {} s to {} s", c.from, c.to)
+        } else {
+            format!("the increment of the load factor {:.6} -> {:.6}", c.from, c.to)
+        }
+    }
+}
+
 /// How an implicit step's systems were solved.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SolverReport {
@@ -151,13 +175,16 @@ pub struct SolverReport {
     pub substeps: usize,
 }
 
-/// A load increment that failed and was halved: the step went on from the
-/// last converged state `from` with half the increment.
+/// An increment that failed and was halved: the step went on from the
+/// last good state `from` with half the increment. Quasi-static steps
+/// ([`SolverReport::cutbacks`]) halve the load increment, explicit steps
+/// ([`DynamicsReport::cutbacks`]) the time step.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cutback {
-    /// Load factor of the last converged state.
+    /// Load factor (quasi-static) or time (explicit, s) of the last good
+    /// state.
     pub from: f64,
-    /// The load factor the failed increment aimed at.
+    /// The load factor or time (s) the failed increment aimed at.
     pub to: f64,
     /// Why it failed ([`StepFailure`]'s message).
     pub reason: String,
@@ -365,6 +392,12 @@ pub struct DynamicsReport {
     pub pattern_reused: bool,
     /// Mass conditioning and CFL numbers, every `condition_every` steps.
     pub conditioning: Option<Conditioning>,
+    /// Each attempt that failed and was cut back (its time step halved and
+    /// retried from the last good state), in order; empty when the step
+    /// went through at `dt`.
+    pub cutbacks: Vec<Cutback>,
+    /// Sub-steps that made up the step (1 without cutbacks).
+    pub substeps: usize,
 }
 
 /// Condition numbers of the three mass matrices at one configuration, and

@@ -901,22 +901,25 @@ impl Recorder {
             self.scalar(&format!("metrics/time/{name}"), v)?;
         }
         self.scalar("metrics/unknowns", report.unknowns as f64)?;
-        if let Some(sr) = &report.solver {
-            // The inertia: negative pivots of the last tangent (a loss of
-            // stability or a spurious mode); cutbacks as warnings.
-            if let Some(n) = sr.negative_pivots {
-                self.scalar("metrics/solver/negative_pivots", n as f64)?;
-            }
-            self.scalar("metrics/solver/cutbacks", sr.cutbacks.len() as f64)?;
-            for c in &sr.cutbacks {
-                self.event(
-                    &format!(
-                        "step {}: cutback: the increment lambda {:.6} -> {:.6} failed and was halved: {}",
-                        report.step, c.from, c.to, c.reason
-                    ),
-                    "WARN",
-                )?;
-            }
+        // The inertia: negative pivots of the last tangent (a loss of
+        // stability or a spurious mode); cutbacks (Newton increments or
+        // explicit time steps) as warnings.
+        if let Some(n) = report.solver.as_ref().and_then(|s| s.negative_pivots) {
+            self.scalar("metrics/solver/negative_pivots", n as f64)?;
+        }
+        if report.solver.is_some() || report.dynamics.is_some() {
+            self.scalar("metrics/solver/cutbacks", report.cutbacks().len() as f64)?;
+        }
+        for c in report.cutbacks() {
+            self.event(
+                &format!(
+                    "step {}: cutback: {} failed and was halved: {}",
+                    report.step,
+                    report.cutback_span(c),
+                    c.reason
+                ),
+                "WARN",
+            )?;
         }
         for b in &report.ibm {
             let base = format!("metrics/ibm/{}", b.name);

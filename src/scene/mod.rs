@@ -535,9 +535,11 @@ pub struct AnalysisSpec {
     /// Newton iterations per load step at most (finite deformation).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: usize,
-    /// Finite deformation: how many times in a row a failing load
-    /// increment may be halved and retried from the last converged state
-    /// (0: the papers' fixed increments, a failure ends the run).
+    /// How many times in a row a failing increment may be halved and
+    /// retried from the last good state: the Newton load increment
+    /// (finite deformation) or the time step (explicit dynamics, when it
+    /// diverges or turns non-finite). 0: the papers' fixed increments, a
+    /// failure ends the run.
     #[serde(default = "default_max_cutbacks")]
     pub max_cutbacks: usize,
     /// Ghost stiffness penalty `gamma_K` (G (27)); 0 switches it off.

@@ -427,8 +427,8 @@ impl Observer for RunResult {
         self.update_s += t.update;
         if let Some(s) = &rep.solver {
             self.negative_pivots = s.negative_pivots.map_or(-1, |n| n as i64);
-            self.cutbacks += s.cutbacks.len();
         }
+        self.cutbacks += rep.cutbacks().len();
         self.unknowns = rep.unknowns;
         self.iterations += rep.iterations.max(1);
         self.condition = rep.condition.map_or(f64::NAN, |c| c.value);

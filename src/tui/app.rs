@@ -709,11 +709,17 @@ impl App {
                 self.progress = None;
                 self.failure = None;
                 self.show_failure = false;
-                let cuts = report.solver.as_ref().map_or(0, |s| s.cutbacks.len());
+                let cuts = report.cutbacks().len();
                 self.status = if cuts > 0 {
                     format!(
-                        "step {} done in {:.3} s after {cuts} load-step cutback(s): the increment was halved",
-                        report.step, report.timings.total
+                        "step {} done in {:.3} s after {cuts} {}",
+                        report.step,
+                        report.timings.total,
+                        if report.dynamics.is_some() {
+                            "time-step cutback(s): the time step was halved"
+                        } else {
+                            "load-step cutback(s): the increment was halved"
+                        }
                     )
                 } else {
                     format!("step {} done in {:.3} s", report.step, report.timings.total)

@@ -979,6 +979,13 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
             c.cfl_stabilised.map_or("-".to_string(), |v| format!("{v:.3e}"))
         )));
     }
+    if !d.cutbacks.is_empty() {
+        lines.push(Line::raw(format!(
+            "cut {}: the time step was halved ({} sub-steps)",
+            d.cutbacks.len(),
+            d.substeps
+        )));
+    }
     lines
 }
 
