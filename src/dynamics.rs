@@ -394,7 +394,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
             pts.x[load.point],
             pts.lp[load.point],
         );
-        for (n, w, _) in st.iter() {
+        for (n, w, _) in st.view().iter() {
             for c in 0..2 {
                 if let Dof::Free(i) = map.dofs.node_dof[n][c] {
                     ext[i] += w * load.force[c];
@@ -512,7 +512,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace) -> Result<StepReport, Ste
         .then(|| {
             // The conditioning's stiffness reads the stencils.
             let model = &sim.model;
-            let map = &Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0);
+            let map = &Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0)?;
             let faces = if faces.is_empty() {
                 ghost::faces_of(grid, map, sim.model.analysis.ghost_cells)
             } else {
@@ -798,7 +798,7 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
 /// leave free.
 pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::FactorError> {
     let model = &sim.model;
-    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0)?;
     let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
     let mut c = conditioning_on(sim, &map, &faces)?;
     let blocks = blocks_of(&map, &faces);
@@ -816,7 +816,8 @@ pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::Fac
 /// per active node (m/s); `Err` when the mass cannot be factorised.
 pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(usize, P2)>, String> {
     let model = &sim.model;
-    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0)
+        .map_err(|e| e.to_string())?;
     let pts = &sim.state.points;
     let faces = if kind == MassKind::Stabilised {
         ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells)

@@ -2,14 +2,14 @@
 //! explicit drivers: the increment `dF` from nodal increments, the stored
 //! `b_e` as a tensor, and committing a point's increment.
 
-use crate::basis::Stencil;
+use crate::basis::StencilView;
 use crate::geometry::P2;
 use crate::material::hencky::{right_stretch, Hencky, Response};
 use crate::points::Points;
 use nalgebra::{Matrix2, Matrix3};
 
 /// `dF = I + sum_v du_v (x) grad S_v` over a point's stencil.
-pub fn increment_gradient(st: &Stencil, du: &[P2]) -> Matrix2<f64> {
+pub fn increment_gradient(st: StencilView, du: &[P2]) -> Matrix2<f64> {
     let g = st.gradient(|n| du[n]);
     Matrix2::new(1.0 + g[0][0], g[0][1], g[1][0], 1.0 + g[1][1])
 }

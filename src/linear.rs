@@ -149,7 +149,8 @@ impl<'a> Setup<'a> {
         let start = Instant::now();
         let grid = &sim.model.grid;
         let pts = &sim.state.points;
-        let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0);
+        let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0)
+            .map_err(|e| e.at_step(step))?;
         let d_of = |p: usize| sim.material_of(p).d_matrix();
         // Implicit boundaries: prescribed increments d^a on the nodes of cut
         // cells, and the band integrated as extra blocks (C (18)-(27)).
@@ -185,7 +186,7 @@ impl<'a> Setup<'a> {
             let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &d_of);
             (band, f_d) = s.band(grid, &material);
             for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
-                let st = &map.stencils[p];
+                let st = map.stencils.get(p);
                 let (bbar, _) = s.point_b(st, pts.x[p]);
                 ibm::add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
             }
@@ -236,7 +237,7 @@ impl<'a> Setup<'a> {
                             out.clear();
                             out.resize(m2 * m2, 0.0);
                             for &p in &g.points {
-                                let (bb, _) = s.point_b(&map.stencils[p], pts.x[p]);
+                                let (bb, _) = s.point_b(map.stencils.get(p), pts.x[p]);
                                 ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
                             }
                         }
@@ -272,7 +273,7 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
     if let Some(s) = &setup.ibm {
         // Points inside a band work through B_bar: correct f_int.
         for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
-            let st = &map.stencils[p];
+            let st = map.stencils.get(p);
             let (bb, plain) = s.point_b(st, pts.x[p]);
             for (k, (n, _, _)) in st.iter().enumerate() {
                 for c in 0..2 {
@@ -436,7 +437,7 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
     let mut ibm_work = 0.0;
     if let Some(s) = &setup.ibm {
         for p in (0..points.len()).filter(|&p| s.in_band[p]) {
-            let st = &map.stencils[p];
+            let st = map.stencils.get(p);
             let (bb, plain) = s.point_b(st, pts.x[p]);
             let (dm, _) = ibm::d_total(s.bs, pts.x[p], s.delta);
             let mut de = [0.0; 3];
@@ -528,7 +529,7 @@ fn point_ibm_reports(
     let mut residual = vec![[0.0; 2]; grid.num_nodes()];
     let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
     for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let (bb, _) = s.point_b(st, old.x[p]);
         for (k, (n, _, _)) in st.iter().enumerate() {
             for c in 0..2 {
@@ -563,7 +564,7 @@ fn updated_points(sim: &Simulation, map: &Mapping, nodal: &[P2]) -> (Points, Vec
     let mut pts = sim.state.points.clone();
     let mut fint_fixed = vec![0.0; map.dofs.constrained.len()];
     for p in 0..pts.len() {
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let du = st.interpolate(|n| nodal[n]);
         let g = st.gradient(|n| nodal[n]);
         let de = [g[0][0], g[1][1], g[0][1] + g[1][0]];

@@ -201,7 +201,8 @@ impl<'a> Setup<'a> {
         let model = &sim.model;
         let grid = &model.grid;
         let pts = &sim.state.points;
-        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, lambda1 - lambda0);
+        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, lambda1 - lambda0)
+            .map_err(|e| e.at_step(step))?;
         let gamma = sim.params.gamma_k;
         let faces = if gamma > 0.0 {
             ghost::faces_of(grid, &map, model.analysis.ghost_cells)
@@ -232,7 +233,7 @@ impl<'a> Setup<'a> {
             let ops = (0..pts.len())
                 .map(|p| {
                     (pts.vol0[p] > 0.0)
-                        .then(|| s.gradient_ops(&map.stencils[p], pts.x[p]))
+                        .then(|| s.gradient_ops(map.stencils.get(p), pts.x[p]))
                         .flatten()
                 })
                 .collect();
@@ -275,11 +276,7 @@ impl<'a> Setup<'a> {
                 })
                 .filter(|&(i, j)| i >= 0 && j >= 0 && i < grid.nx as i64 && j < grid.ny as i64)
                 .flat_map(|(i, j)| grid.cell_nodes(i as usize, j as usize))
-                .chain(
-                    b.points
-                        .iter()
-                        .flat_map(|&p| map.stencils[p].nodes[..map.stencils[p].len].to_vec()),
-                )
+                .chain(b.points.iter().flat_map(|&p| map.stencils.get(p).nodes()))
                 .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
                 .collect();
             nodes.sort_unstable();
@@ -332,7 +329,7 @@ impl<'a> Setup<'a> {
     /// Where point `p` is at unknowns `d`: `x + D S d + S d^a`.
     fn moved(&self, p: usize, d: &[P2]) -> P2 {
         let x = self.sim.state.points.x[p];
-        let st = &self.map.stencils[p];
+        let st = self.map.stencils.get(p);
         let u = match &self.band {
             Some(b) => b.step.point_increment(st, x, d),
             None => st.interpolate(|n| d[n]),
@@ -446,7 +443,7 @@ impl<'a> Setup<'a> {
         let mut columns: Vec<usize> = b
             .points
             .iter()
-            .flat_map(|&p| self.map.stencils[p].nodes[..self.map.stencils[p].len].to_vec())
+            .flat_map(|&p| self.map.stencils.get(p).nodes())
             .filter(|&n| local(n).is_some())
             .collect();
         columns.sort_unstable();
@@ -868,7 +865,7 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
         })
         .collect();
     for p in 0..pts.len() {
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let x = setup.moved(p, d);
         let df = match setup.band.as_ref().and_then(|b| b.ops[p].as_ref().map(|o| (o, b))) {
             Some((ops, b)) => band_gradient(st, ops, d, &b.step.da),

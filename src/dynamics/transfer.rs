@@ -47,7 +47,7 @@ impl Default for Workspace {
         Workspace {
             transfer: Transfer::default(),
             map: Mapping {
-                stencils: Vec::new(),
+                stencils: Default::default(),
                 groups: Vec::new(),
                 dofs: DofMap::default(),
                 active_cells: Vec::new(),
