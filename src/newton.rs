@@ -629,7 +629,7 @@ fn increment(
     timings.condition = t.elapsed().as_secs_f64();
     // 4. The points' new state, the work of loads and supports, and the
     //    implicit boundaries' reactions (the last tangent and its factor
-    //    are freed first: the points are copied).
+    //    are freed first: the fields the step writes are copied).
     let factor = solved.last.take().map(|(_, f)| (f.kind(), f.negative_pivots()));
     let t = Instant::now();
     let updated = update(&setup, &solved)?;
@@ -846,9 +846,10 @@ struct Updated {
     max_increment: f64,
 }
 
-/// Commit the converged increment into a copy of the points (`F`, `b_e`,
-/// stress, positions `x + D S d + S d^a`, volumes, GIMP domains), check
-/// them, and account the work: free dofs carry `f_ext` (trapezoidal between
+/// Commit the converged increment into a copy of the fields it changes
+/// (`F`, `b_e`, stress, positions `x + D S d + S d^a`, volumes, GIMP
+/// domains; [`crate::points::Points::finite_copy`]), check them, and
+/// account the work: free dofs carry `f_ext` (trapezoidal between
 /// the step's start and end, tractions on their curves then), prescribed
 /// dofs their support force, implicit boundaries their reactions.
 fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
@@ -856,7 +857,10 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
     let (res, it) = (&solved.res, &solved.res.it);
     let lambda1 = setup.lambda;
     let lambda0 = setup.lambda0;
-    let mut pts = sim.state.points.clone();
+    let old = &sim.state.points;
+    let mut pts = old.finite_copy().map_err(|_| {
+        linalg::FactorError::allocation("the points' new state", old.len().saturating_mul(145)).at_step(setup.step)
+    })?;
     let (mut strain_energy, mut dissipation) = (0.0, 0.0);
     let total: Vec<P2> = (0..d.len())
         .map(|n| {
@@ -872,7 +876,7 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
             None => increment_gradient(st, &total),
         };
         pts.x[p] = x;
-        if let Some((w, diss)) = commit_point(&mut pts, p, &df, it.responses[p].as_ref(), &sim.hencky(p)) {
+        if let Some((w, diss)) = commit_point(old, &mut pts, p, &df, it.responses[p].as_ref(), &sim.hencky(p)) {
             strain_energy += w;
             dissipation += diss;
         }

@@ -153,7 +153,8 @@ impl Simulation {
         &self.state.active_cells
     }
 
-    /// Commit a quasi-static step and move the moving implicit boundaries
+    /// Commit a quasi-static step (`points`: the fields it wrote, moved in
+    /// by [`Points::take_written`]) and move the moving implicit boundaries
     /// by the load factor's increment `dlambda`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn commit_quasi_static(
@@ -166,7 +167,7 @@ impl Simulation {
         iterations: usize,
         dlambda: f64,
     ) {
-        self.state.points = points;
+        self.state.points.take_written(points);
         self.state.step = step;
         self.state.external_work += work;
         self.state.active_cells = active_cells;
