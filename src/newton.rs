@@ -754,6 +754,10 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
                 tolerance: params.tolerance,
             });
         }
+        // The previous tangent and its factor are read only after the last
+        // iteration: free them before the next are built, so that two
+        // factors are never held at once.
+        drop(last.take());
         let t = Instant::now();
         let k = setup.tangent(&res, &d, setup.gamma)?;
         timings.assembly += t.elapsed().as_secs_f64();
