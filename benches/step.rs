@@ -58,7 +58,8 @@ fn bench(c: &mut Criterion) {
     let model = Model::from_text(&scene(), "bench.toml").expect("bench scene");
     let d = model.materials[0].d_matrix();
     let d_of = |_p: usize| d;
-    let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0);
+    let map = Mapping::build(&model.grid, &model.points, &model.bodies, &model.dirichlet, 0.0)
+        .expect("memory for the mapping");
     println!("unknowns: {}, points: {}", map.dofs.n_free, model.points.len());
     let mut g = c.benchmark_group("step-100k");
     g.sample_size(10);

@@ -8,13 +8,12 @@
 //! through a [`Pattern`] built once per step (faer triplet indices with their
 //! argsort), so refilling values for another iteration is a copy.
 
-use crate::basis::{stencil, BasisKind, Stencil};
+use crate::basis::{factor_len, key_of, weights_1d, write_factors, BasisKind, StencilKey, StencilView};
 use crate::grid::Grid;
 use crate::linalg::FactorError;
 use crate::model::{Body, GridDirichlet, GridTarget};
 use crate::points::Points;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-use std::collections::BTreeMap;
 
 /// What a node's displacement component is this step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -147,9 +146,76 @@ pub struct Pattern {
     storage: Storage,
 }
 
+/// The stencils of every point of one step, stored compactly: per point
+/// its node rectangle ([`StencilKey`]) and where its 1D basis factors start
+/// in one flat array (`2 (ni + nj)` numbers: 8 for the standard basis'
+/// 2 x 2 nodes, up to 16 for GIMP's 4 x 4), read through [`StencilView`]s
+/// that form the weights and gradients as [`crate::basis::stencil`] does.
+/// A standard-basis point takes 84 bytes (12 key, 8 offset, 64 factors).
+#[derive(Clone, Debug, Default)]
+pub struct Stencils {
+    /// Node numbers per grid row (`nx + 1`).
+    row: usize,
+    /// Per point, its node rectangle.
+    keys: Vec<StencilKey>,
+    /// Per point, where its factors start in `factors`, and their end.
+    start: Vec<usize>,
+    /// Every point's `[S_x, dS_x/dx, S_y, dS_y/dy]` (1, 1/m), point by point.
+    factors: Vec<f64>,
+}
+
+impl Stencils {
+    /// The stencils of the points at their current positions, each with its
+    /// body's basis. The buffers are reserved fallibly: memory that cannot
+    /// be had is an error (a step failure), not an abort.
+    pub fn build(grid: &Grid, pts: &Points, bodies: &[Body]) -> Result<Stencils, FactorError> {
+        let n = pts.len();
+        let weights = |p: usize| weights_1d(grid, bodies[pts.body[p]].basis, pts.x[p], pts.lp[p]);
+        let mut keys = try_with_capacity(n, "the points' stencil keys")?;
+        keys.extend((0..n).map(|p| key_of(&weights(p))));
+        let mut start = try_with_capacity(n + 1, "the points' stencil offsets")?;
+        start.push(0);
+        let mut total = 0;
+        for &k in &keys {
+            total += factor_len(k);
+            start.push(total);
+        }
+        let mut factors = try_filled(total, 0.0, "the points' stencil weights")?;
+        for p in 0..n {
+            write_factors(&weights(p), &mut factors[start[p]..start[p + 1]]);
+        }
+        Ok(Stencils {
+            row: grid.nx + 1,
+            keys,
+            start,
+            factors,
+        })
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// Point `p`'s stencil.
+    #[inline]
+    pub fn get(&self, p: usize) -> StencilView<'_> {
+        StencilView::new(self.keys[p], self.row, &self.factors[self.start[p]..self.start[p + 1]])
+    }
+
+    /// Every point's stencil, in point order.
+    pub fn iter(&self) -> impl Iterator<Item = StencilView<'_>> {
+        (0..self.len()).map(|p| self.get(p))
+    }
+}
+
 /// The points mapped to the grid at the start of a step.
 pub struct Mapping {
-    pub stencils: Vec<Stencil>,
+    pub stencils: Stencils,
     pub groups: Vec<Group>,
     pub dofs: DofMap,
     /// Cells a point's basis reaches into (standard: the cell holding it;
@@ -166,26 +232,19 @@ pub struct Mapping {
 impl Mapping {
     /// Map the points (at their current positions) to the grid and number
     /// the dofs; prescribed components get `value * dlambda` as this step's
-    /// increment.
-    pub fn build(grid: &Grid, pts: &Points, bodies: &[Body], dirichlet: &[GridDirichlet], dlambda: f64) -> Mapping {
-        let stencils: Vec<Stencil> = (0..pts.len())
-            .map(|p| stencil(grid, bodies[pts.body[p]].basis, pts.x[p], pts.lp[p]))
-            .collect();
-        let mut by_key: BTreeMap<(u32, u32, u8, u8), Vec<usize>> = BTreeMap::new();
-        for (p, s) in stencils.iter().enumerate() {
-            if pts.vol[p] > 0.0 {
-                by_key.entry(s.key).or_default().push(p);
-            }
-        }
-        let groups: Vec<Group> = by_key
-            .into_values()
-            .map(|points| Group {
-                nodes: stencils[points[0]].nodes[..stencils[points[0]].len].to_vec(),
-                points,
-            })
-            .collect();
-
-        let mut active = vec![false; grid.num_nodes()];
+    /// increment. The stencils, the groups, the per-node and per-cell flags
+    /// and the dof map are reserved fallibly: memory that cannot be had is
+    /// an error ([`FactorError::Memory`], a step failure), not an abort.
+    pub fn build(
+        grid: &Grid,
+        pts: &Points,
+        bodies: &[Body],
+        dirichlet: &[GridDirichlet],
+        dlambda: f64,
+    ) -> Result<Mapping, FactorError> {
+        let stencils = Stencils::build(grid, pts, bodies)?;
+        let groups = groups_of(pts, &stencils)?;
+        let mut active = try_filled(grid.num_nodes(), false, "the active nodes")?;
         for g in &groups {
             for &n in &g.nodes {
                 active[n] = true;
@@ -194,26 +253,12 @@ impl Mapping {
         // Active cells: those a point's basis reaches into: its own cell
         // (standard), or every cell its GIMP domain overlaps by more than
         // round-off (the cells whose nodes it weights).
-        let mut cells = vec![false; grid.num_cells()];
-        let mut cell_fill = vec![0.0; grid.num_cells()];
-        for p in 0..pts.len() {
-            if pts.vol[p] == 0.0 {
-                continue;
-            }
-            reached_cells(
-                grid,
-                bodies[pts.body[p]].basis,
-                pts.x[p],
-                pts.lp[p],
-                pts.vol[p],
-                |c, fill| {
-                    cells[c] = true;
-                    cell_fill[c] += fill;
-                },
-            );
-        }
+        let mut cells = try_filled(grid.num_cells(), false, "the active cells")?;
+        let mut cell_fill = try_filled(grid.num_cells(), 0.0, "the cells' fill")?;
+        reach(grid, pts, bodies, &mut cells, &mut cell_fill);
         let active_cells = (0..cells.len()).filter(|&c| cells[c]).collect();
-        let mut populated = vec![false; grid.num_cells()];
+        let mut populated = cells;
+        populated.fill(false);
         for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
             if let Some((i, j)) = grid.cell_of(pts.x[p]) {
                 populated[j * grid.nx + i] = true;
@@ -221,16 +266,19 @@ impl Mapping {
         }
         let populated_cells = (0..populated.len()).filter(|&c| populated[c]).collect();
 
-        let mut dofs = DofMap::default();
+        let mut dofs = DofMap {
+            node_dof: try_with_capacity(grid.num_nodes(), "the dof map")?,
+            ..DofMap::default()
+        };
         dofs.number(&active, &prescribed(grid, dirichlet, dlambda));
-        Mapping {
+        Ok(Mapping {
             stencils,
             groups,
             dofs,
             active_cells,
             populated_cells,
             cell_fill,
-        }
+        })
     }
 
     /// The dofs of a group's nodes, `[x0, y0, x1, y1, ...]`.
@@ -245,11 +293,11 @@ impl Mapping {
         out.clear();
         out.resize(m2 * m2, 0.0);
         for &p in &g.points {
-            let s = &self.stencils[p];
+            let s = self.stencils.get(p);
             let d = d_of(p);
             let v = pts.vol[p];
-            for a in 0..s.len {
-                let [ax, ay] = s.dw[a];
+            for a in 0..s.len() {
+                let [ax, ay] = s.dw(a);
                 // Rows of B^T for node a: [[ax, 0, ay], [0, ay, ax]]; times D.
                 let bd = [
                     [
@@ -263,8 +311,8 @@ impl Mapping {
                         ay * d[1][2] + ax * d[2][2],
                     ],
                 ];
-                for b in 0..s.len {
-                    let [bx, by] = s.dw[b];
+                for b in 0..s.len() {
+                    let [bx, by] = s.dw(b);
                     // Columns of B for node b: [bx, 0, by] and [0, by, bx].
                     for (i, row) in bd.iter().enumerate() {
                         let kx = row[0] * bx + row[2] * by;
@@ -276,6 +324,57 @@ impl Mapping {
             }
         }
     }
+}
+
+/// The points with volume grouped by the node rectangle they touch, in
+/// rectangle order, each group's points in point order; its nodes are
+/// those of its first point's stencil.
+fn groups_of(pts: &Points, stencils: &Stencils) -> Result<Vec<Group>, FactorError> {
+    let mut order = try_with_capacity(pts.len(), "the points' grouping")?;
+    order.extend((0..pts.len()).filter(|&p| pts.vol[p] > 0.0));
+    order.sort_unstable_by_key(|&p| (stencils.get(p).key(), p));
+    let same = |p: &usize, q: &usize| stencils.get(*p).key() == stencils.get(*q).key();
+    let mut groups = try_with_capacity(order.chunk_by(same).count(), "the point groups")?;
+    for run in order.chunk_by(same) {
+        let st = stencils.get(run[0]);
+        let mut nodes = try_with_capacity(st.len(), "a point group's nodes")?;
+        nodes.extend(st.nodes());
+        let mut points = try_with_capacity(run.len(), "a point group's points")?;
+        points.extend_from_slice(run);
+        groups.push(Group { nodes, points });
+    }
+    Ok(groups)
+}
+
+/// Per grid cell, whether a point with volume reaches into it with its
+/// basis (`cells`), and the fraction of its area the points fill
+/// (`fill`), both zeroed by the caller ([`reached_cells`]).
+fn reach(grid: &Grid, pts: &Points, bodies: &[Body], cells: &mut [bool], fill: &mut [f64]) {
+    for p in 0..pts.len() {
+        if pts.vol[p] == 0.0 {
+            continue;
+        }
+        reached_cells(
+            grid,
+            bodies[pts.body[p]].basis,
+            pts.x[p],
+            pts.lp[p],
+            pts.vol[p],
+            |c, f| {
+                cells[c] = true;
+                fill[c] += f;
+            },
+        );
+    }
+}
+
+/// The cells the points' bases reach into ([`Mapping::active_cells`])
+/// without the rest of a mapping: what a simulation shows before its first
+/// step.
+pub(crate) fn active_cells(grid: &Grid, pts: &Points, bodies: &[Body]) -> Vec<usize> {
+    let mut cells = vec![false; grid.num_cells()];
+    reach(grid, pts, bodies, &mut cells, &mut vec![0.0; grid.num_cells()]);
+    (0..cells.len()).filter(|&c| cells[c]).collect()
 }
 
 /// Which entries of the reduced matrix a [`Pattern`] stores.
@@ -433,6 +532,14 @@ impl Pattern {
 
 /// `n` copies of `value`, or the failure to allocate them for `what`.
 pub(crate) fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>, FactorError> {
+    let mut v = try_with_capacity(n, what)?;
+    v.resize(n, value);
+    Ok(v)
+}
+
+/// An empty vector with room for `n` entries, or the failure to allocate
+/// it for `what`.
+pub(crate) fn try_with_capacity<T>(n: usize, what: &str) -> Result<Vec<T>, FactorError> {
     let mut v = Vec::new();
     v.try_reserve_exact(n).map_err(|_| {
         FactorError::allocation(
@@ -440,7 +547,6 @@ pub(crate) fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec
             n.saturating_mul(std::mem::size_of::<T>()),
         )
     })?;
-    v.resize(n, value);
     Ok(v)
 }
 

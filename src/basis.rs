@@ -39,27 +39,154 @@ impl BasisKind {
     }
 }
 
+/// The 1D factors of one stencil are at most `2 (4 + 4)` numbers.
+const MAX_FACTORS: usize = 16;
+
+/// A point's node rectangle `(i0, j0, ni, nj)`: node columns
+/// `i0 .. i0 + ni` and rows `j0 .. j0 + nj`. Points with equal keys touch
+/// the same nodes, which is what assembly groups by.
+pub type StencilKey = (u32, u32, u8, u8);
+
 /// The nodes a point touches with their weights `S_vp` and gradients
-/// `dS_vp/dx` (1/length). The nodes form the rectangle of node columns
-/// `i0 .. i0 + ni` and rows `j0 .. j0 + nj`, listed row by row.
+/// `dS_vp/dx` (1/length), owned: one point's stencil built on its own
+/// (quadrature points of a band, a point load). Stored as its 1D factors;
+/// [`Stencil::view`] reads it. A step's stencils of all points are kept
+/// compactly in [`crate::assembly::Stencils`].
 #[derive(Clone, Copy, Debug)]
 pub struct Stencil {
-    pub len: usize,
-    pub nodes: [usize; MAX_NODES],
-    pub w: [f64; MAX_NODES],
-    pub dw: [[f64; 2]; MAX_NODES],
-    /// `(i0, j0, ni, nj)`: the node rectangle. Points with equal keys touch
-    /// the same nodes, which is what assembly groups by.
-    pub key: (u32, u32, u8, u8),
+    key: StencilKey,
+    /// Node numbers per grid row (`nx + 1`).
+    row: usize,
+    /// `[S_x (ni), dS_x/dx (ni), S_y (nj), dS_y/dy (nj)]`, the rest unused.
+    factors: [f64; MAX_FACTORS],
 }
 
 impl Stencil {
-    pub fn iter(&self) -> impl Iterator<Item = (usize, f64, [f64; 2])> + '_ {
-        (0..self.len).map(|k| (self.nodes[k], self.w[k], self.dw[k]))
+    /// The stencil as the view every consumer reads.
+    pub fn view(&self) -> StencilView<'_> {
+        StencilView::new(self.key, self.row, &self.factors[..factor_len(self.key)])
+    }
+}
+
+/// How many 1D factors a stencil of node rectangle `key` has:
+/// `2 (ni + nj)`.
+#[inline]
+pub(crate) fn factor_len(key: StencilKey) -> usize {
+    2 * (key.2 as usize + key.3 as usize)
+}
+
+/// One point's stencil, borrowed: its node rectangle `key` (the nodes
+/// listed row by row: node `k` is column `i0 + k % ni`, row `j0 + k / ni`)
+/// and its 1D factors, from which every weight and gradient is formed as
+/// [`stencil`] forms it (`S = S_x S_y`, `grad S = [S_x' S_y, S_x S_y']`),
+/// so the numbers are those of a stencil that stores the products. Cheap to
+/// copy (a key, a stride and a slice).
+#[derive(Clone, Copy, Debug)]
+pub struct StencilView<'a> {
+    key: StencilKey,
+    /// Node numbers per grid row (`nx + 1`).
+    row: usize,
+    ni: usize,
+    nj: usize,
+    /// `[S_x (ni), dS_x/dx (ni), S_y (nj), dS_y/dy (nj)]` (1, 1/length).
+    factors: &'a [f64],
+}
+
+impl<'a> StencilView<'a> {
+    /// The view of node rectangle `key` on a grid of `row` nodes per row
+    /// with `factors` laid out as `[S_x, dS_x/dx, S_y, dS_y/dy]`
+    /// (`2 (ni + nj)` numbers).
+    #[inline]
+    pub(crate) fn new(key: StencilKey, row: usize, factors: &'a [f64]) -> StencilView<'a> {
+        StencilView {
+            key,
+            row,
+            ni: key.2 as usize,
+            nj: key.3 as usize,
+            factors,
+        }
+    }
+
+    /// Number of nodes, `ni nj`.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.ni * self.nj
+    }
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The node rectangle `(i0, j0, ni, nj)`.
+    #[inline]
+    pub fn key(&self) -> StencilKey {
+        self.key
+    }
+
+    #[inline]
+    fn first(&self) -> usize {
+        self.key.1 as usize * self.row + self.key.0 as usize
+    }
+
+    #[inline]
+    fn wx(&self, a: usize) -> f64 {
+        self.factors[a]
+    }
+
+    #[inline]
+    fn dwx(&self, a: usize) -> f64 {
+        self.factors[self.ni + a]
+    }
+
+    #[inline]
+    fn wy(&self, b: usize) -> f64 {
+        self.factors[2 * self.ni + b]
+    }
+
+    #[inline]
+    fn dwy(&self, b: usize) -> f64 {
+        self.factors[2 * self.ni + self.nj + b]
+    }
+
+    /// Grid node of entry `k` (`k < len`).
+    #[inline]
+    pub fn node(&self, k: usize) -> usize {
+        self.first() + (k / self.ni) * self.row + k % self.ni
+    }
+
+    /// Weight `S_vp` of entry `k` (1).
+    #[inline]
+    pub fn w(&self, k: usize) -> f64 {
+        self.wx(k % self.ni) * self.wy(k / self.ni)
+    }
+
+    /// Gradient `dS_vp/dx` of entry `k` (1/length).
+    #[inline]
+    pub fn dw(&self, k: usize) -> [f64; 2] {
+        let (a, b) = (k % self.ni, k / self.ni);
+        [self.dwx(a) * self.wy(b), self.wx(a) * self.dwy(b)]
+    }
+
+    /// The grid nodes, row by row.
+    pub fn nodes(self) -> impl Iterator<Item = usize> + 'a {
+        let (first, row, ni) = (self.first(), self.row, self.ni);
+        (0..self.nj).flat_map(move |b| (0..ni).map(move |a| first + b * row + a))
+    }
+
+    /// `(node, S_vp, dS_vp/dx)` row by row.
+    pub fn iter(self) -> impl Iterator<Item = (usize, f64, [f64; 2])> + 'a {
+        let (first, row, ni) = (self.first(), self.row, self.ni);
+        (0..self.nj).flat_map(move |b| {
+            (0..ni).map(move |a| {
+                let (wx, dwx, wy, dwy) = (self.wx(a), self.dwx(a), self.wy(b), self.dwy(b));
+                (first + b * row + a, wx * wy, [dwx * wy, wx * dwy])
+            })
+        })
     }
 
     /// Interpolate a nodal vector field (two values per grid node).
-    pub fn interpolate(&self, nodal: impl Fn(usize) -> [f64; 2]) -> [f64; 2] {
+    pub fn interpolate(self, nodal: impl Fn(usize) -> [f64; 2]) -> [f64; 2] {
         let mut u = [0.0; 2];
         for (n, w, _) in self.iter() {
             let v = nodal(n);
@@ -70,7 +197,7 @@ impl Stencil {
     }
 
     /// Gradient `du_i/dx_j` of a nodal vector field, as `[[u_x,x, u_x,y], [u_y,x, u_y,y]]`.
-    pub fn gradient(&self, nodal: impl Fn(usize) -> [f64; 2]) -> [[f64; 2]; 2] {
+    pub fn gradient(self, nodal: impl Fn(usize) -> [f64; 2]) -> [[f64; 2]; 2] {
         let mut g = [[0.0; 2]; 2];
         for (n, _, dw) in self.iter() {
             let v = nodal(n);
@@ -170,25 +297,34 @@ pub(crate) fn weights_1d(grid: &Grid, kind: BasisKind, x: [f64; 2], lp: [f64; 2]
     }
 }
 
+/// The node rectangle of a point's 1D factors.
+#[inline]
+pub(crate) fn key_of(w: &[Weights1d; 2]) -> StencilKey {
+    let [wx, wy] = w;
+    (wx.first as u32, wy.first as u32, wx.len as u8, wy.len as u8)
+}
+
+/// Write a point's 1D factors as a [`StencilView`] reads them,
+/// `[S_x, dS_x/dx, S_y, dS_y/dy]`, into `out` (`2 (ni + nj)` numbers).
+#[inline]
+pub(crate) fn write_factors(w: &[Weights1d; 2], out: &mut [f64]) {
+    let [wx, wy] = w;
+    let (ni, nj) = (wx.len, wy.len);
+    out[..ni].copy_from_slice(&wx.w[..ni]);
+    out[ni..2 * ni].copy_from_slice(&wx.dw[..ni]);
+    out[2 * ni..2 * ni + nj].copy_from_slice(&wy.w[..nj]);
+    out[2 * ni + nj..2 * (ni + nj)].copy_from_slice(&wy.dw[..nj]);
+}
+
 /// The stencil of a point at `x` with GIMP half-lengths `lp` (ignored by the
 /// standard basis). The point must lie inside the grid.
 pub fn stencil(grid: &Grid, kind: BasisKind, x: [f64; 2], lp: [f64; 2]) -> Stencil {
-    let [wx, wy] = weights_1d(grid, kind, x, lp);
+    let w = weights_1d(grid, kind, x, lp);
     let mut st = Stencil {
-        len: 0,
-        nodes: [0; MAX_NODES],
-        w: [0.0; MAX_NODES],
-        dw: [[0.0; 2]; MAX_NODES],
-        key: (wx.first as u32, wy.first as u32, wx.len as u8, wy.len as u8),
+        key: key_of(&w),
+        row: grid.nx + 1,
+        factors: [0.0; MAX_FACTORS],
     };
-    for b in 0..wy.len {
-        for a in 0..wx.len {
-            let k = st.len;
-            st.nodes[k] = grid.node(wx.first + a, wy.first + b);
-            st.w[k] = wx.w[a] * wy.w[b];
-            st.dw[k] = [wx.dw[a] * wy.w[b], wx.w[a] * wy.dw[b]];
-            st.len += 1;
-        }
-    }
+    write_factors(&w, &mut st.factors);
     st
 }

@@ -77,7 +77,7 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
                     .points
                     .iter()
                     .filter(|&&p| pts.vol0[p] > 0.0 && !in_band(p))
-                    .map(|&p| (p, increment_gradient(&map.stencils[p], total)))
+                    .map(|&p| (p, increment_gradient(map.stencils.get(p), total)))
                     .collect();
                 for &(p, df) in &members {
                     sj += pts.vol[p] * df.determinant();
@@ -109,7 +109,7 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
             it.responses.push(None);
             continue;
         }
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let v0 = pts.vol0[p];
         let ops = band.and_then(|(ops, d, da)| ops[p].as_ref().map(|o| (o, d, da)));
         let r = match ops {
@@ -180,7 +180,7 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
 
 /// `dF = I + sum_k sum_l d_kl G_k[l] + grad(S d^a)` of a point inside a
 /// band ([`GradOp`]).
-pub(crate) fn band_gradient(st: &crate::basis::Stencil, ops: &[GradOp], d: &[P2], da: &[P2]) -> Matrix2<f64> {
+pub(crate) fn band_gradient(st: crate::basis::StencilView, ops: &[GradOp], d: &[P2], da: &[P2]) -> Matrix2<f64> {
     let ga = st.gradient(|n| da[n]);
     let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
     for (k, (n, _, _)) in st.iter().enumerate() {
@@ -223,9 +223,9 @@ pub(crate) fn group_tangent(
         let mut big_h = vec![0.0; m2];
         for &q in &g.points {
             let Some(fq) = &f[q] else { continue };
-            let st = &map.stencils[q];
-            for bb in 0..st.len {
-                let h = fq.finv_t * nalgebra::Vector2::new(st.dw[bb][0], st.dw[bb][1]);
+            let st = map.stencils.get(q);
+            for bb in 0..st.len() {
+                let h = fq.finv_t * nalgebra::Vector2::new(st.dw(bb)[0], st.dw(bb)[1]);
                 for k in 0..2 {
                     big_h[2 * bb + k] += pts.vol[q] * fq.j * h[k] / (jbar * vsum);
                 }
@@ -235,10 +235,10 @@ pub(crate) fn group_tangent(
     });
     for &p in &g.points {
         let Some(r) = &it.responses[p] else { continue };
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let v0 = sim.state.points.vol0[p];
         if let Some(op) = ops.and_then(|o| o[p].as_ref()) {
-            for a in 0..st.len {
+            for a in 0..st.len() {
                 for l in 0..2 {
                     // (G_a[l] : A)_kq
                     let mut ga = [[0.0; 2]; 2];
@@ -255,7 +255,7 @@ pub(crate) fn group_tangent(
                             }
                         }
                     }
-                    for bb in 0..st.len {
+                    for bb in 0..st.len() {
                         for m in 0..2 {
                             let mut s = 0.0;
                             for k in 0..2 {
@@ -272,10 +272,10 @@ pub(crate) fn group_tangent(
         }
         let fp = fbar.as_ref().and_then(|(f, h)| f[p].as_ref().map(|fp| (fp, h)));
         let scale = fp.map_or(1.0, |(fp, _)| fp.c * fp.c);
-        for a in 0..st.len {
-            let ga = st.dw[a];
-            for bb in 0..st.len {
-                let gb = st.dw[bb];
+        for a in 0..st.len() {
+            let ga = st.dw(a);
+            for bb in 0..st.len() {
+                let gb = st.dw(bb);
                 for i in 0..2 {
                     for k in 0..2 {
                         let mut s = 0.0;
@@ -293,13 +293,13 @@ pub(crate) fn group_tangent(
         if let Some((fp, big_h)) = fp {
             // h_p(b, k) = (dF_p^-T grad S_b)_k.
             let mut hp = [0.0; 2 * crate::basis::MAX_NODES];
-            for bb in 0..st.len {
-                let h = fp.finv_t * nalgebra::Vector2::new(st.dw[bb][0], st.dw[bb][1]);
+            for bb in 0..st.len() {
+                let h = fp.finv_t * nalgebra::Vector2::new(st.dw(bb)[0], st.dw(bb)[1]);
                 hp[2 * bb] = h[0];
                 hp[2 * bb + 1] = h[1];
             }
-            for a in 0..st.len {
-                let qa = fp.q * nalgebra::Vector2::new(st.dw[a][0], st.dw[a][1]);
+            for a in 0..st.len() {
+                let qa = fp.q * nalgebra::Vector2::new(st.dw(a)[0], st.dw(a)[1]);
                 for l in 0..2 {
                     for col in 0..m2 {
                         out[(2 * a + l) * m2 + col] += v0 * qa[l] * 0.5 * fp.c * (big_h[col] - hp[col]);

@@ -753,7 +753,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
         tr.nodal_a.iter_mut().for_each(|v| *v = [0.0; 2]);
     }
     let gravity = sim.model.gravity;
-    let first = tr.stress_pass(grid, pts, &bodies, gravity, true, usf, pool);
+    let first = tr.stress_pass(grid, pts, &bodies, Some(gravity), usf, pool);
     // The free-dof internal force, then f_ext: body forces, point loads
     // and tractions in that order (as `Simulation::nodal_forces`).
     transfer::gather_into(&map.dofs, &tr.fint, fint);
@@ -770,7 +770,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
             pts.x[load.point],
             pts.lp[load.point],
         );
-        for (n, w, _) in st.iter() {
+        for (n, w, _) in st.view().iter() {
             for c in 0..2 {
                 if let Dof::Free(i) = map.dofs.node_dof[n][c] {
                     ext[i] += w * load.force[c];
@@ -808,7 +808,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
             let (du, v) = (&mut tr.nodal_a, &tr.nodal_b);
             du.clear();
             du.extend(v.iter().map(|v| [dt * v[0], dt * v[1]]));
-            tr.stress_pass(grid, pts, &bodies, gravity, false, true, pool)
+            tr.stress_pass(grid, pts, &bodies, None, true, pool)
         }
         StressUpdate::Musl => {
             // Sulsky's modified USL: the strain increment from the updated
@@ -821,7 +821,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
             transfer::gather_into(&map.dofs, &tr.momentum, bm);
             mass.solve_into(bm, vm);
             transfer::scatter_into(&map.dofs, vm, Some(dt), &mut tr.nodal_a);
-            tr.stress_pass(grid, pts, &bodies, gravity, false, true, pool)
+            tr.stress_pass(grid, pts, &bodies, None, true, pool)
         }
     };
     let (strain, dissipation) = (committed.strain, committed.dissipation);
@@ -889,7 +889,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
         .then(|| {
             // The conditioning's stiffness reads the stencils.
             let model = &sim.model;
-            let map = &Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0);
+            let map = &Mapping::build(grid, pts, &model.bodies, &model.dirichlet, 0.0)?;
             let faces = if faces.is_empty() {
                 ghost::faces_of(grid, map, sim.model.analysis.ghost_cells)
             } else {
@@ -1179,7 +1179,7 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
 /// leave free.
 pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::FactorError> {
     let model = &sim.model;
-    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0)?;
     let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
     let mut c = conditioning_on(sim, &map, &faces)?;
     let blocks = blocks_of(&map, &faces);
@@ -1197,7 +1197,8 @@ pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::Fac
 /// per active node (m/s); `Err` when the mass cannot be factorised.
 pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(usize, P2)>, String> {
     let model = &sim.model;
-    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+    let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0)
+        .map_err(|e| e.to_string())?;
     let pts = &sim.state.points;
     let faces = if kind == MassKind::Stabilised {
         ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells)
@@ -1276,7 +1277,7 @@ mass = "stabilised"
         for roller in [false, true] {
             let sim = block(roller);
             let model = &sim.model;
-            let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0);
+            let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0).unwrap();
             let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
             let blocks = blocks_of(&map, &faces);
             let points = PointsOnGrid::of(&sim);

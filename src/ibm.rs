@@ -18,7 +18,7 @@
 //! their strain moves to the right-hand side, `f_d = -int B_bar^T C B d^a`
 //! (over the points, and `(B_bar - B)^T` over the band for the same reason).
 
-use crate::basis::{stencil, BasisKind, Stencil};
+use crate::basis::{stencil, BasisKind, Stencil, StencilView};
 use crate::exact::ExactSolution;
 use crate::geometry::P2;
 use crate::grid::Grid;
@@ -260,7 +260,7 @@ impl IbmBoundary {
                 let t = 0.5 * (1.0 + xi);
                 let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
                 let st = grid_stencil(grid, [x[0] + 1e-9 * grid.h * n[0], x[1] + 1e-9 * grid.h * n[1]]);
-                for (k, nk, _) in st.iter() {
+                for (k, nk, _) in st.view().iter() {
                     let w = 0.5 * len * wi * nk;
                     let m = out.entry(k).or_insert([[0.0; 2]; 2]);
                     for r in 0..2 {
@@ -365,7 +365,7 @@ pub fn in_band(bs: &[IbmBoundary], x: P2, delta: f64) -> bool {
 /// The modified strain operator split as `(B1, B2)` at `x` for a stencil:
 /// per node, the 3 x 2 matrices (Voigt rows xx, yy, xy; columns the
 /// displacement components).
-pub fn b_bar(st: &Stencil, d: &M2, g: &[M2; 2]) -> Vec<(Op, Op)> {
+pub fn b_bar(st: StencilView, d: &M2, g: &[M2; 2]) -> Vec<(Op, Op)> {
     st.iter()
         .map(|(_, w, dw)| {
             let mut b1 = [[0.0; 2]; 3];
@@ -481,7 +481,7 @@ fn fit_exact_with(
                 let t = 0.5 * (1.0 + xi);
                 let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
                 let st = grid_stencil(grid, [x[0] + 1e-9 * grid.h * n[0], x[1] + 1e-9 * grid.h * n[1]]);
-                let nodes: Vec<(usize, f64)> = st.iter().map(|(k, w, _)| (k, w)).collect();
+                let nodes: Vec<(usize, f64)> = st.view().iter().map(|(k, w, _)| (k, w)).collect();
                 for &(k, _) in &nodes {
                     let len_before = index.len();
                     index.entry(k).or_insert(len_before);
@@ -641,7 +641,7 @@ impl<'a> IbmStep<'a> {
 
     /// Strain operator rows of a point: `B_bar` (for `d`) per stencil node,
     /// and the plain `B` (for `d^a`).
-    pub fn point_b(&self, st: &Stencil, x: P2) -> (Vec<Op>, Vec<Op>) {
+    pub fn point_b(&self, st: StencilView, x: P2) -> (Vec<Op>, Vec<Op>) {
         let plain = plain_b(st);
         if !in_band(self.bs, x, self.delta) {
             return (plain.clone(), plain);
@@ -653,7 +653,7 @@ impl<'a> IbmStep<'a> {
 }
 
 /// The plain strain operator `B` of a stencil, per node.
-pub fn plain_b(st: &Stencil) -> Vec<Op> {
+pub fn plain_b(st: StencilView) -> Vec<Op> {
     st.iter()
         .map(|(_, _, g)| [[g[0], 0.0], [0.0, g[1]], [g[1], g[0]]])
         .collect()
@@ -699,7 +699,7 @@ pub type GradOp = [[[f64; 2]; 2]; 2];
 
 /// Add `w B_bar^T C (B d^a)` to the nodal force `f` (the strain of the
 /// prescribed field moved to the right-hand side).
-pub fn add_fd(st: &Stencil, bbar: &[Op], c: &[[f64; 3]; 3], da: &[P2], w: f64, f: &mut [P2]) {
+pub fn add_fd(st: StencilView, bbar: &[Op], c: &[[f64; 3]; 3], da: &[P2], w: f64, f: &mut [P2]) {
     let g = st.gradient(|n| da[n]);
     let eps = [g[0][0], g[1][1], g[0][1] + g[1][0]];
     if eps == [0.0; 3] {
@@ -805,18 +805,19 @@ impl IbmStep<'_> {
         let mut band: std::collections::BTreeMap<(u32, u32, u8, u8), BandBlock> = Default::default();
         for b in self.bs {
             for (x, w) in b.band_points(grid, self.delta) {
-                let st = grid_stencil(grid, x);
+                let owned = grid_stencil(grid, x);
+                let st = owned.view();
                 let c = material.at(grid, x);
                 let (dm, g) = d_total(self.bs, x, self.delta);
-                let (b1, b2): (Vec<Op>, Vec<Op>) = b_bar(&st, &dm, &g).into_iter().unzip();
+                let (b1, b2): (Vec<Op>, Vec<Op>) = b_bar(st, &dm, &g).into_iter().unzip();
                 let entry = band
-                    .entry(st.key)
-                    .or_insert_with(|| (st.nodes[..st.len].to_vec(), vec![0.0; 4 * st.len * st.len]));
-                let plain = plain_b(&st);
+                    .entry(st.key())
+                    .or_insert_with(|| (st.nodes().collect(), vec![0.0; 4 * st.len() * st.len()]));
+                let plain = plain_b(st);
                 let bbar = add_ops(&b1, 1.0, &b2);
                 add_atcb(&bbar, &c, &bbar, w, &mut entry.1);
                 add_atcb(&plain, &c, &plain, -w, &mut entry.1);
-                add_fd(&st, &add_ops(&bbar, -1.0, &plain), &c, &self.da, w, &mut f_d);
+                add_fd(st, &add_ops(&bbar, -1.0, &plain), &c, &self.da, w, &mut f_d);
             }
         }
         (band.into_values().collect(), f_d)
@@ -824,7 +825,7 @@ impl IbmStep<'_> {
 
     /// A point's [`GradOp`] per stencil node when it lies in a band; `None`
     /// elsewhere (there `D = I` and `dF = I + grad(S (d + d^a))`).
-    pub fn gradient_ops(&self, st: &Stencil, x: P2) -> Option<Vec<GradOp>> {
+    pub fn gradient_ops(&self, st: StencilView, x: P2) -> Option<Vec<GradOp>> {
         if !in_band(self.bs, x, self.delta) {
             return None;
         }
@@ -848,7 +849,7 @@ impl IbmStep<'_> {
 
     /// Move a point at `x` with nodal increments `d` (the unknowns) and the
     /// prescribed `d^a`: `D S d + S d^a`.
-    pub fn point_increment(&self, st: &Stencil, x: P2, d: &[P2]) -> P2 {
+    pub fn point_increment(&self, st: StencilView, x: P2, d: &[P2]) -> P2 {
         let nd = st.interpolate(|n| d[n]);
         let na = st.interpolate(|n| self.da[n]);
         if !in_band(self.bs, x, self.delta) {
@@ -994,8 +995,8 @@ impl IbmStep<'_> {
                     let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
                     let st = grid_stencil(grid, [x[0] + 1e-12 * grid.h * n[0], x[1] + 1e-12 * grid.h * n[1]]);
                     let (dm, _) = d_total(self.bs, x, self.delta);
-                    let nd = st.interpolate(|k| nodal_d[k]);
-                    let na = st.interpolate(|k| self.da[k]);
+                    let nd = st.view().interpolate(|k| nodal_d[k]);
+                    let na = st.view().interpolate(|k| self.da[k]);
                     let u = [
                         dm[0][0] * nd[0] + dm[0][1] * nd[1] + na[0],
                         dm[1][0] * nd[0] + dm[1][1] * nd[1] + na[1],

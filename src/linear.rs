@@ -55,8 +55,8 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let t = Instant::now();
     let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor, &residuals)?;
     timings.condition = t.elapsed().as_secs_f64();
-    // 6. Update the points; work and stored energy (the factor and the
-    //    matrix are no longer needed: free them before the points are copied).
+    // 6. Update the points; work and stored energy (the factor is no
+    //    longer needed: free it before the fields the step writes are copied).
     drop(factor);
     let t = Instant::now();
     let updated = update(&setup, &system, &du, &residuals)?;
@@ -149,7 +149,8 @@ impl<'a> Setup<'a> {
         let start = Instant::now();
         let grid = &sim.model.grid;
         let pts = &sim.state.points;
-        let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0);
+        let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0)
+            .map_err(|e| e.at_step(step))?;
         let d_of = |p: usize| sim.material_of(p).d_matrix();
         // Implicit boundaries: prescribed increments d^a on the nodes of cut
         // cells, and the band integrated as extra blocks (C (18)-(27)).
@@ -185,7 +186,7 @@ impl<'a> Setup<'a> {
             let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &d_of);
             (band, f_d) = s.band(grid, &material);
             for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
-                let st = &map.stencils[p];
+                let st = map.stencils.get(p);
                 let (bbar, _) = s.point_b(st, pts.x[p]);
                 ibm::add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
             }
@@ -236,7 +237,7 @@ impl<'a> Setup<'a> {
                             out.clear();
                             out.resize(m2 * m2, 0.0);
                             for &p in &g.points {
-                                let (bb, _) = s.point_b(&map.stencils[p], pts.x[p]);
+                                let (bb, _) = s.point_b(map.stencils.get(p), pts.x[p]);
                                 ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
                             }
                         }
@@ -272,7 +273,7 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
     if let Some(s) = &setup.ibm {
         // Points inside a band work through B_bar: correct f_int.
         for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
-            let st = &map.stencils[p];
+            let st = map.stencils.get(p);
             let (bb, plain) = s.point_b(st, pts.x[p]);
             for (k, (n, _, _)) in st.iter().enumerate() {
                 for c in 0..2 {
@@ -404,6 +405,7 @@ fn conditioning(
 
 /// The points after a step, and what the step did.
 struct Updated {
+    /// The fields the step wrote ([`Points::small_strain_copy`]).
     points: Points,
     /// Stored energy after the step (J per unit thickness).
     strain_energy: f64,
@@ -431,12 +433,12 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
         None => nodal_d.clone(),
     };
     let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
-    let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal);
+    let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal, step)?;
     let mut ibm_reports = Vec::new();
     let mut ibm_work = 0.0;
     if let Some(s) = &setup.ibm {
         for p in (0..points.len()).filter(|&p| s.in_band[p]) {
-            let st = &map.stencils[p];
+            let st = map.stencils.get(p);
             let (bb, plain) = s.point_b(st, pts.x[p]);
             let (dm, _) = ibm::d_total(s.bs, pts.x[p], s.delta);
             let mut de = [0.0; 3];
@@ -528,7 +530,7 @@ fn point_ibm_reports(
     let mut residual = vec![[0.0; 2]; grid.num_nodes()];
     let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
     for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let (bb, _) = s.point_b(st, old.x[p]);
         for (k, (n, _, _)) in st.iter().enumerate() {
             for c in 0..2 {
@@ -557,17 +559,27 @@ fn point_ibm_reports(
     )
 }
 
-/// Points after applying nodal increments, and the internal force of
-/// the new stresses on the prescribed dofs (start-of-step geometry).
-fn updated_points(sim: &Simulation, map: &Mapping, nodal: &[P2]) -> (Points, Vec<f64>) {
-    let mut pts = sim.state.points.clone();
+/// The fields a small-strain step writes after applying nodal increments
+/// ([`Points::small_strain_copy`]: the points themselves stay as they were
+/// until the step is committed), and the internal force of the new
+/// stresses on the prescribed dofs (start-of-step geometry).
+fn updated_points(
+    sim: &Simulation,
+    map: &Mapping,
+    nodal: &[P2],
+    step: usize,
+) -> Result<(Points, Vec<f64>), StepFailure> {
+    let old = &sim.state.points;
+    let mut pts = old.small_strain_copy().map_err(|_| {
+        linalg::FactorError::allocation("the points' new state", old.len().saturating_mul(88)).at_step(step)
+    })?;
     let mut fint_fixed = vec![0.0; map.dofs.constrained.len()];
     for p in 0..pts.len() {
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let du = st.interpolate(|n| nodal[n]);
         let g = st.gradient(|n| nodal[n]);
         let de = [g[0][0], g[1][1], g[0][1] + g[1][0]];
-        let d = sim.model.materials[sim.model.bodies[pts.body[p]].material].d_matrix();
+        let d = sim.model.materials[sim.model.bodies[old.body[p]].material].d_matrix();
         let ds = mul3(&d, de);
         let v = pts.vol[p];
         for k in 0..3 {
@@ -590,7 +602,7 @@ fn updated_points(sim: &Simulation, map: &Mapping, nodal: &[P2]) -> (Points, Vec
         pts.vol[p] *= det;
         pts.lp[p] = [pts.lp[p][0] * (1.0 + g[0][0]), pts.lp[p][1] * (1.0 + g[1][1])];
     }
-    (pts, fint_fixed)
+    Ok((pts, fint_fixed))
 }
 /// Increment of every grid node: solved values on free dofs, prescribed
 /// increments on fixed ones, zero elsewhere.

@@ -313,8 +313,10 @@ fn main() -> ExitCode {
             no_record,
             force,
             &cadence,
-            &limits(max_memory),
-            threads,
+            &Engine {
+                limits: limits(max_memory),
+                threads,
+            },
             resume.as_deref(),
         ),
         None => tui(
@@ -323,8 +325,10 @@ fn main() -> ExitCode {
             false,
             false,
             &RecordArgs::default(),
-            &Limits::default(),
-            None,
+            &Engine {
+                limits: Limits::default(),
+                threads: None,
+            },
             None,
         ),
     };
@@ -335,6 +339,13 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// What the engine may use: its memory budget and threads (`--max-memory`,
+/// `--threads`).
+struct Engine {
+    limits: Limits,
+    threads: Option<usize>,
 }
 
 /// `--threads`: start them, say so (unless `quiet`), or exit 2 naming why not.
@@ -1573,10 +1584,10 @@ fn tui(
     no_record: bool,
     force: bool,
     cadence: &RecordArgs,
-    limits: &Limits,
-    threads: Option<usize>,
+    engine: &Engine,
     resume: Option<&Path>,
 ) -> Result<ExitCode> {
+    let (limits, threads) = (&engine.limits, engine.threads);
     if resume.is_some() && scene.is_none() {
         eprintln!("error: --resume needs the scene file the checkpoint was written for");
         return Ok(ExitCode::from(2));

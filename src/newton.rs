@@ -201,7 +201,8 @@ impl<'a> Setup<'a> {
         let model = &sim.model;
         let grid = &model.grid;
         let pts = &sim.state.points;
-        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, lambda1 - lambda0);
+        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, lambda1 - lambda0)
+            .map_err(|e| e.at_step(step))?;
         let gamma = sim.params.gamma_k;
         let faces = if gamma > 0.0 {
             ghost::faces_of(grid, &map, model.analysis.ghost_cells)
@@ -232,7 +233,7 @@ impl<'a> Setup<'a> {
             let ops = (0..pts.len())
                 .map(|p| {
                     (pts.vol0[p] > 0.0)
-                        .then(|| s.gradient_ops(&map.stencils[p], pts.x[p]))
+                        .then(|| s.gradient_ops(map.stencils.get(p), pts.x[p]))
                         .flatten()
                 })
                 .collect();
@@ -275,11 +276,7 @@ impl<'a> Setup<'a> {
                 })
                 .filter(|&(i, j)| i >= 0 && j >= 0 && i < grid.nx as i64 && j < grid.ny as i64)
                 .flat_map(|(i, j)| grid.cell_nodes(i as usize, j as usize))
-                .chain(
-                    b.points
-                        .iter()
-                        .flat_map(|&p| map.stencils[p].nodes[..map.stencils[p].len].to_vec()),
-                )
+                .chain(b.points.iter().flat_map(|&p| map.stencils.get(p).nodes()))
                 .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
                 .collect();
             nodes.sort_unstable();
@@ -332,7 +329,7 @@ impl<'a> Setup<'a> {
     /// Where point `p` is at unknowns `d`: `x + D S d + S d^a`.
     fn moved(&self, p: usize, d: &[P2]) -> P2 {
         let x = self.sim.state.points.x[p];
-        let st = &self.map.stencils[p];
+        let st = self.map.stencils.get(p);
         let u = match &self.band {
             Some(b) => b.step.point_increment(st, x, d),
             None => st.interpolate(|n| d[n]),
@@ -446,7 +443,7 @@ impl<'a> Setup<'a> {
         let mut columns: Vec<usize> = b
             .points
             .iter()
-            .flat_map(|&p| self.map.stencils[p].nodes[..self.map.stencils[p].len].to_vec())
+            .flat_map(|&p| self.map.stencils.get(p).nodes())
             .filter(|&n| local(n).is_some())
             .collect();
         columns.sort_unstable();
@@ -632,7 +629,7 @@ fn increment(
     timings.condition = t.elapsed().as_secs_f64();
     // 4. The points' new state, the work of loads and supports, and the
     //    implicit boundaries' reactions (the last tangent and its factor
-    //    are freed first: the points are copied).
+    //    are freed first: the fields the step writes are copied).
     let factor = solved.last.take().map(|(_, f)| (f.kind(), f.negative_pivots()));
     let t = Instant::now();
     let updated = update(&setup, &solved)?;
@@ -757,6 +754,10 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
                 tolerance: params.tolerance,
             });
         }
+        // The previous tangent and its factor are read only after the last
+        // iteration: free them before the next are built, so that two
+        // factors are never held at once.
+        drop(last.take());
         let t = Instant::now();
         let k = setup.tangent(&res, &d, setup.gamma)?;
         timings.assembly += t.elapsed().as_secs_f64();
@@ -849,9 +850,10 @@ struct Updated {
     max_increment: f64,
 }
 
-/// Commit the converged increment into a copy of the points (`F`, `b_e`,
-/// stress, positions `x + D S d + S d^a`, volumes, GIMP domains), check
-/// them, and account the work: free dofs carry `f_ext` (trapezoidal between
+/// Commit the converged increment into a copy of the fields it changes
+/// (`F`, `b_e`, stress, positions `x + D S d + S d^a`, volumes, GIMP
+/// domains; [`crate::points::Points::finite_copy`]), check them, and
+/// account the work: free dofs carry `f_ext` (trapezoidal between
 /// the step's start and end, tractions on their curves then), prescribed
 /// dofs their support force, implicit boundaries their reactions.
 fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
@@ -859,7 +861,10 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
     let (res, it) = (&solved.res, &solved.res.it);
     let lambda1 = setup.lambda;
     let lambda0 = setup.lambda0;
-    let mut pts = sim.state.points.clone();
+    let old = &sim.state.points;
+    let mut pts = old.finite_copy().map_err(|_| {
+        linalg::FactorError::allocation("the points' new state", old.len().saturating_mul(145)).at_step(setup.step)
+    })?;
     let (mut strain_energy, mut dissipation) = (0.0, 0.0);
     let total: Vec<P2> = (0..d.len())
         .map(|n| {
@@ -868,14 +873,14 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
         })
         .collect();
     for p in 0..pts.len() {
-        let st = &map.stencils[p];
+        let st = map.stencils.get(p);
         let x = setup.moved(p, d);
         let df = match setup.band.as_ref().and_then(|b| b.ops[p].as_ref().map(|o| (o, b))) {
             Some((ops, b)) => band_gradient(st, ops, d, &b.step.da),
             None => increment_gradient(st, &total),
         };
         pts.x[p] = x;
-        if let Some((w, diss)) = commit_point(&mut pts, p, &df, it.responses[p].as_ref(), &sim.hencky(p)) {
+        if let Some((w, diss)) = commit_point(old, &mut pts, p, &df, it.responses[p].as_ref(), &sim.hencky(p)) {
             strain_energy += w;
             dissipation += diss;
         }

@@ -1,6 +1,15 @@
 //! Material point state, stored as a struct of arrays.
 
 use crate::geometry::P2;
+use std::collections::TryReserveError;
+
+/// A copy of `v`, reserved fallibly.
+fn try_clone<T: Clone>(v: &[T]) -> Result<Vec<T>, TryReserveError> {
+    let mut c = Vec::new();
+    c.try_reserve_exact(v.len())?;
+    c.extend_from_slice(v);
+    Ok(c)
+}
 
 /// All material points of a model. Index `p` runs over every array.
 #[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
@@ -94,6 +103,67 @@ impl Points {
 
     /// Bytes one point takes in every array.
     pub const BYTES_PER_POINT: u64 = (2 * 16 + 3 * 8 + 2 * 24 + 16 + 8 + 2 * 32 + 2 * 8 + 1 + 16 + 16) as u64;
+
+    /// A copy of the fields a small-strain step writes (`x`, `vol`, `lp`,
+    /// `stress`, `strain`), the others left empty: the step computes the new
+    /// state into it while the points stay as they were, and
+    /// [`Points::take_written`] moves it in once the step has passed its
+    /// checks (88 of the 240 bytes of a point). Reserved fallibly.
+    pub(crate) fn small_strain_copy(&self) -> Result<Points, TryReserveError> {
+        Ok(Points {
+            x: try_clone(&self.x)?,
+            vol: try_clone(&self.vol)?,
+            lp: try_clone(&self.lp)?,
+            stress: try_clone(&self.stress)?,
+            strain: try_clone(&self.strain)?,
+            ..Points::default()
+        })
+    }
+
+    /// As [`Points::small_strain_copy`], the fields a finite-deformation
+    /// step writes: `x`, `vol`, `lp`, `stress`, `def_grad`, `b_e`, `szz`,
+    /// `dissipation`, `yielding` (145 of the 240 bytes of a point).
+    pub(crate) fn finite_copy(&self) -> Result<Points, TryReserveError> {
+        Ok(Points {
+            x: try_clone(&self.x)?,
+            vol: try_clone(&self.vol)?,
+            lp: try_clone(&self.lp)?,
+            stress: try_clone(&self.stress)?,
+            def_grad: try_clone(&self.def_grad)?,
+            b_e: try_clone(&self.b_e)?,
+            szz: try_clone(&self.szz)?,
+            dissipation: try_clone(&self.dissipation)?,
+            yielding: try_clone(&self.yielding)?,
+            ..Points::default()
+        })
+    }
+
+    /// Move in the fields a step wrote into `next` (those it holds, as
+    /// [`Points::small_strain_copy`] and [`Points::finite_copy`] make it);
+    /// the others stay.
+    pub(crate) fn take_written(&mut self, next: Points) {
+        fn take<T>(into: &mut Vec<T>, from: Vec<T>) {
+            if !from.is_empty() {
+                *into = from;
+            }
+        }
+        take(&mut self.x, next.x);
+        take(&mut self.x0, next.x0);
+        take(&mut self.vol, next.vol);
+        take(&mut self.vol0, next.vol0);
+        take(&mut self.mass, next.mass);
+        take(&mut self.stress, next.stress);
+        take(&mut self.strain, next.strain);
+        take(&mut self.lp, next.lp);
+        take(&mut self.body, next.body);
+        take(&mut self.def_grad, next.def_grad);
+        take(&mut self.b_e, next.b_e);
+        take(&mut self.szz, next.szz);
+        take(&mut self.dissipation, next.dissipation);
+        take(&mut self.yielding, next.yielding);
+        take(&mut self.lp0, next.lp0);
+        take(&mut self.v, next.v);
+    }
 
     /// Displacement since generation (m).
     pub fn displacement(&self, p: usize) -> P2 {

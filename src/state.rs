@@ -99,7 +99,7 @@ impl Simulation {
         };
         let mut points = std::mem::take(&mut model.points);
         points.shrink_to_fit();
-        let map = Mapping::build(&model.grid, &points, &model.bodies, &model.dirichlet, 0.0);
+        let active_cells = crate::assembly::active_cells(&model.grid, &points, &model.bodies);
         let initial_energy = points.kinetic_energy();
         let state = State {
             points,
@@ -108,7 +108,7 @@ impl Simulation {
             strain_energy: 0.0,
             ghost_energy: 0.0,
             ghost_force: Vec::new(),
-            active_cells: map.active_cells,
+            active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,
             ibm_offsets: vec![[0.0; 2]; model.ibm.len()],
@@ -157,7 +157,8 @@ impl Simulation {
         &self.state.active_cells
     }
 
-    /// Commit a quasi-static step and move the moving implicit boundaries
+    /// Commit a quasi-static step (`points`: the fields it wrote, moved in
+    /// by [`Points::take_written`]) and move the moving implicit boundaries
     /// by the load factor's increment `dlambda`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn commit_quasi_static(
@@ -170,7 +171,7 @@ impl Simulation {
         iterations: usize,
         dlambda: f64,
     ) {
-        self.state.points = points;
+        self.state.points.take_written(points);
         self.state.step = step;
         self.state.external_work += work;
         self.state.active_cells = active_cells;
@@ -418,7 +419,7 @@ impl Simulation {
             }
             let s = pts.stress[p];
             let v = pts.vol[p];
-            for (n, w, [dx, dy]) in map.stencils[p].iter() {
+            for (n, w, [dx, dy]) in map.stencils.get(p).iter() {
                 let fi = [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v];
                 let fe = [w * pts.mass[p] * g[0], w * pts.mass[p] * g[1]];
                 for c in 0..2 {
@@ -434,7 +435,7 @@ impl Simulation {
             }
         }
         for load in &self.model.point_loads {
-            for (n, w, _) in map.stencils[load.point].iter() {
+            for (n, w, _) in map.stencils.get(load.point).iter() {
                 for c in 0..2 {
                     if let Dof::Free(i) = map.dofs.node_dof[n][c] {
                         f.ext[i] += w * load.force[c];

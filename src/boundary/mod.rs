@@ -115,7 +115,7 @@ pub fn traction_forces(
                 };
                 let jw = speed * half * wi;
                 let st = stencil(grid, BasisKind::Standard, x, [0.0; 2]);
-                for (node, w, _) in st.iter() {
+                for (node, w, _) in st.view().iter() {
                     if w == 0.0 {
                         continue;
                     }

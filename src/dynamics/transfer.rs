@@ -47,7 +47,7 @@ impl Default for Workspace {
         Workspace {
             transfer: Transfer::default(),
             map: Mapping {
-                stencils: Vec::new(),
+                stencils: Default::default(),
                 groups: Vec::new(),
                 dofs: DofMap::default(),
                 active_cells: Vec::new(),
@@ -564,25 +564,26 @@ impl Transfer {
     /// The stress pass over the points, with the nodal increments `du`
     /// (m, per grid node) in [`Transfer::nodal_a`]: per point
     /// `dF = I + sum_v du_v (x) grad S_v` and the material's response
-    /// (points with `V0 > 0`). With `forces`: the nodal internal force
-    /// `sum_p V0_p P_p grad S` (`P = tau dF^-T`) and body force
-    /// `sum_p S m_p g` (points with `V > 0`; `gravity` m/s^2). With
+    /// (points with `V0 > 0`). With `forces = Some(gravity)` (m/s^2): the
+    /// nodal internal force `sum_p V0_p P_p grad S` (`P = tau dF^-T`) and
+    /// body force `sum_p S m_p g` (points with `V > 0`). With
     /// `commit`: the points' updated `F`, `V`, GIMP domains, stresses,
     /// `b_e`, dissipation into [`Transfer::next`] (as
     /// [`crate::kinematics::commit_point`]), their energies and the
-    /// largest `|dF - I|`.
+    /// largest `|dF - I|`. With `pool`, the material updates run on its
+    /// threads and the sums follow in point order (the same result).
     pub(crate) fn stress_pass(
         &mut self,
         grid: &Grid,
         pts: &Points,
         bodies: &Bodies,
-        gravity: P2,
-        forces: bool,
+        forces: Option<P2>,
         commit: bool,
         pool: Option<&rayon::ThreadPool>,
     ) -> Committed {
         let nodes = grid.num_nodes();
-        if forces {
+        let gravity = forces.unwrap_or([0.0; 2]);
+        if forces.is_some() {
             reset(&mut self.fint, nodes, [0.0; 2]);
             if gravity != [0.0; 2] {
                 reset(&mut self.body_force, nodes, [0.0; 2]);
@@ -598,7 +599,7 @@ impl Transfer {
         let mut forces = Forces {
             fint,
             body_force,
-            gravity: if forces { Some(gravity) } else { None },
+            gravity: forces,
         };
         match pool {
             None => {

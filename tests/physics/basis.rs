@@ -22,13 +22,14 @@ proptest! {
                                    sx in 0.0f64..=7.0, sy in 0.0f64..=5.0) {
         let g = grid(h, ox, oy);
         let x = [ox + sx * h, oy + sy * h];
-        let s = stencil(&g, BasisKind::Standard, x, [0.0; 2]);
-        let sum: f64 = s.w[..s.len].iter().sum();
-        let dsum = s.dw[..s.len].iter().fold([0.0, 0.0], |a, d| [a[0] + d[0], a[1] + d[1]]);
+        let owned = stencil(&g, BasisKind::Standard, x, [0.0; 2]);
+        let s = owned.view();
+        let sum: f64 = (0..s.len()).map(|k| s.w(k)).sum();
+        let dsum = (0..s.len()).map(|k| s.dw(k)).fold([0.0, 0.0], |a, d| [a[0] + d[0], a[1] + d[1]]);
         // Sums of 4 terms of size <= 1 (weights) and <= 1/h (gradients).
         prop_assert!((sum - 1.0).abs() < 1e-14, "sum {}", sum);
         prop_assert!(dsum[0].abs() * h < 1e-14 && dsum[1].abs() * h < 1e-14, "{:?}", dsum);
-        prop_assert!(s.w[..s.len].iter().all(|&w| w >= -1e-15));
+        prop_assert!((0..s.len()).all(|k| s.w(k) >= -1e-15));
     }
 
     #[test]
@@ -39,13 +40,14 @@ proptest! {
         let lp = [lx * h, ly * h];
         // Keep the domain inside the grid, where unity holds.
         let x = [ox + lp[0] + sx * (7.0 * h - 2.0 * lp[0]), oy + lp[1] + sy * (5.0 * h - 2.0 * lp[1])];
-        let s = stencil(&g, BasisKind::Gimp, x, lp);
-        let sum: f64 = s.w[..s.len].iter().sum();
-        let dsum = s.dw[..s.len].iter().fold([0.0, 0.0], |a, d| [a[0] + d[0], a[1] + d[1]]);
+        let owned = stencil(&g, BasisKind::Gimp, x, lp);
+        let s = owned.view();
+        let sum: f64 = (0..s.len()).map(|k| s.w(k)).sum();
+        let dsum = (0..s.len()).map(|k| s.dw(k)).fold([0.0, 0.0], |a, d| [a[0] + d[0], a[1] + d[1]]);
         // Up to 9 terms; gradients of size 1/l.
         prop_assert!((sum - 1.0).abs() < 1e-13, "sum {}", sum);
         prop_assert!(dsum[0].abs() * lp[0] < 1e-13 && dsum[1].abs() * lp[1] < 1e-13, "{:?}", dsum);
-        prop_assert!(s.w[..s.len].iter().all(|&w| w >= -1e-15));
+        prop_assert!((0..s.len()).all(|k| s.w(k) >= -1e-15));
     }
 
     #[test]
@@ -53,19 +55,20 @@ proptest! {
         let g = grid(1.0, 0.0, 0.0);
         let lp = [lx, 0.3];
         let x = [1.0 + sx * 5.0, 1.0 + sy * 3.0];
-        let s = stencil(&g, BasisKind::Gimp, x, lp);
+        let owned = stencil(&g, BasisKind::Gimp, x, lp);
+        let s = owned.view();
         let eps = 1e-6;
         for d in 0..2 {
             let mut xp = x; xp[d] += eps;
             let mut xm = x; xm[d] -= eps;
             let sp = stencil(&g, BasisKind::Gimp, xp, lp);
             let sm = stencil(&g, BasisKind::Gimp, xm, lp);
-            for k in 0..s.len {
-                let w = |st: &mpmlab::basis::Stencil| (0..st.len).find(|&j| st.nodes[j] == s.nodes[k]).map_or(0.0, |j| st.w[j]);
-                let fd = (w(&sp) - w(&sm)) / (2.0 * eps);
+            for k in 0..s.len() {
+                let w = |st: mpmlab::basis::StencilView| (0..st.len()).find(|&j| st.node(j) == s.node(k)).map_or(0.0, |j| st.w(j));
+                let fd = (w(sp.view()) - w(sm.view())) / (2.0 * eps);
                 // GIMP weights are C1 with second derivatives <= 1/(h l): the
                 // central difference error is O(eps^2 / (h l)) + round-off 1e-16/eps.
-                prop_assert!((fd - s.dw[k][d]).abs() < 1e-7, "node {} dir {}: fd {} vs {}", s.nodes[k], d, fd, s.dw[k][d]);
+                prop_assert!((fd - s.dw(k)[d]).abs() < 1e-7, "node {} dir {}: fd {} vs {}", s.node(k), d, fd, s.dw(k)[d]);
             }
         }
     }
