@@ -320,10 +320,16 @@ fn plastic_collision_dissipates() {
     assert!(d35 > 0.05 * w0, "{d35:e}");
     for r in &reports {
         let e = r.energy.kinetic + r.energy.strain + r.energy.plastic_dissipation;
+        let d = r.dynamics.as_ref().unwrap();
+        assert!((e - w0).abs() < 2e-2 * w0, "t = {}: {e:e} vs {w0:e}", d.time);
+        // The reported balance is that sum less the loads' work and W0
+        // (here no loads: the work is 0), to round-off.
+        let balance = e - r.energy.external_work - w0;
         assert!(
-            (e - w0).abs() < 2e-2 * w0,
-            "t = {}: {e:e} vs {w0:e}",
-            r.dynamics.as_ref().unwrap().time
+            (d.energy_error - balance).abs() <= 1e-12 * w0,
+            "t = {}: balance {:e} vs {balance:e}",
+            d.time,
+            d.energy_error
         );
     }
 }
@@ -576,6 +582,18 @@ fn exhausted_time_step_cutbacks_fail_and_restore_the_step_start() {
             Ok(r) => {
                 cut += r.cutbacks().len();
                 assert!(sim.step_index() == step + 1);
+                // The reported balance, cut back or not: kinetic + strain +
+                // dissipation - the work of gravity (> 0 here) - W0, to
+                // round-off of the largest of them.
+                let (e, d) = (&r.energy, r.dynamics.as_ref().unwrap());
+                let balance = e.kinetic + e.strain + e.plastic_dissipation - e.external_work - d.initial_energy;
+                assert!(e.external_work > 0.0);
+                assert!(
+                    (d.energy_error - balance).abs() <= 1e-12 * e.external_work.max(d.initial_energy),
+                    "step {}: {} vs {balance}",
+                    r.step,
+                    d.energy_error
+                );
             }
             Err(f) => break (start, f),
         }
