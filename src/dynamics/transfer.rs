@@ -9,7 +9,9 @@
 //! no stencil array, no dynamic dispatch, no per-point vectors. Every sum
 //! runs over the points in the same order, with the same expressions, as
 //! the stencil-based helpers of [`super`], so the results are the same to
-//! the bit.
+//! the bit. With a thread pool ([`crate::Simulation::set_threads`]) the
+//! stress pass updates the points' materials in parallel chunks and then
+//! sums their forces and energies in point order: the same bits again.
 //!
 //! The updated points are written into [`Transfer::next`] and swapped
 //! into the state only once every guard has passed
