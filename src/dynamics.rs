@@ -25,7 +25,7 @@
 //!    [`StepFailure::NonFinite`]: the state stays at the last good step.
 //!
 //! A step that fails for want of a smaller time step (see
-//! [`can_cut_back`]) is cut back ([`cut_back`]): retried from its start as
+//! `can_cut_back`) is cut back (`cut_back`): retried from its start as
 //! two sub-steps of `dt / 2`, each halved again when it fails, at most
 //! `analysis.max_cutbacks` halvings deep; the next step starts again at
 //! `dt`. `max_cutbacks = 0` keeps the papers' fixed time steps.
