@@ -255,7 +255,7 @@ impl Mapping {
         // round-off (the cells whose nodes it weights).
         let mut cells = try_filled(grid.num_cells(), false, "the active cells")?;
         let mut cell_fill = try_filled(grid.num_cells(), 0.0, "the cells' fill")?;
-        reach(grid, pts, bodies, &mut cells, &mut cell_fill);
+        reach(grid, pts, |b| bodies[b].basis, &mut cells, &mut cell_fill);
         let active_cells = (0..cells.len()).filter(|&c| cells[c]).collect();
         let mut populated = cells;
         populated.fill(false);
@@ -348,23 +348,24 @@ fn groups_of(pts: &Points, stencils: &Stencils) -> Result<Vec<Group>, FactorErro
 
 /// Per grid cell, whether a point with volume reaches into it with its
 /// basis (`cells`), and the fraction of its area the points fill
-/// (`fill`), both zeroed by the caller ([`reached_cells`]).
-fn reach(grid: &Grid, pts: &Points, bodies: &[Body], cells: &mut [bool], fill: &mut [f64]) {
+/// (`fill`), both zeroed by the caller ([`reached_cells`]); `basis(b)` is
+/// body `b`'s basis. The points in order: the fill sums the same way for
+/// every caller.
+pub(crate) fn reach(
+    grid: &Grid,
+    pts: &Points,
+    basis: impl Fn(usize) -> BasisKind,
+    cells: &mut [bool],
+    fill: &mut [f64],
+) {
     for p in 0..pts.len() {
         if pts.vol[p] == 0.0 {
             continue;
         }
-        reached_cells(
-            grid,
-            bodies[pts.body[p]].basis,
-            pts.x[p],
-            pts.lp[p],
-            pts.vol[p],
-            |c, f| {
-                cells[c] = true;
-                fill[c] += f;
-            },
-        );
+        reached_cells(grid, basis(pts.body[p]), pts.x[p], pts.lp[p], pts.vol[p], |c, f| {
+            cells[c] = true;
+            fill[c] += f;
+        });
     }
 }
 
@@ -373,7 +374,13 @@ fn reach(grid: &Grid, pts: &Points, bodies: &[Body], cells: &mut [bool], fill: &
 /// step.
 pub(crate) fn active_cells(grid: &Grid, pts: &Points, bodies: &[Body]) -> Vec<usize> {
     let mut cells = vec![false; grid.num_cells()];
-    reach(grid, pts, bodies, &mut cells, &mut vec![0.0; grid.num_cells()]);
+    reach(
+        grid,
+        pts,
+        |b| bodies[b].basis,
+        &mut cells,
+        &mut vec![0.0; grid.num_cells()],
+    );
     (0..cells.len()).filter(|&c| cells[c]).collect()
 }
 

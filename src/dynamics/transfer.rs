@@ -520,22 +520,7 @@ impl Transfer {
         reset(&mut self.cells, grid.num_cells(), false);
         reset(&mut map.cell_fill, grid.num_cells(), 0.0);
         let (cells, fill) = (&mut self.cells, &mut map.cell_fill);
-        for p in 0..pts.len() {
-            if pts.vol[p] == 0.0 {
-                continue;
-            }
-            reached_cells(
-                grid,
-                bodies.basis[pts.body[p]],
-                pts.x[p],
-                pts.lp[p],
-                pts.vol[p],
-                |c, f| {
-                    cells[c] = true;
-                    fill[c] += f;
-                },
-            );
-        }
+        crate::assembly::reach(grid, pts, |b| bodies.basis[b], cells, fill);
         map.active_cells.clear();
         map.active_cells.extend((0..cells.len()).filter(|&c| cells[c]));
         cells.iter_mut().for_each(|c| *c = false);
