@@ -70,8 +70,12 @@ impl DofMap {
 
 /// Per grid node, the prescribed increment of each component this step
 /// (`value * dlambda`, m), or `None`: later conditions override earlier ones.
-pub(crate) fn prescribed(grid: &Grid, dirichlet: &[GridDirichlet], dlambda: f64) -> Vec<[Option<f64>; 2]> {
-    let mut prescribed: Vec<[Option<f64>; 2]> = vec![[None, None]; grid.num_nodes()];
+pub(crate) fn prescribed(
+    grid: &Grid,
+    dirichlet: &[GridDirichlet],
+    dlambda: f64,
+) -> Result<Vec<[Option<f64>; 2]>, FactorError> {
+    let mut prescribed: Vec<[Option<f64>; 2]> = try_filled(grid.num_nodes(), [None, None], "the prescribed nodes")?;
     for d in dirichlet {
         let nodes: Vec<usize> = match d.target {
             GridTarget::Line { axis: 0, index } => (0..=grid.ny).map(|k| grid.node(index, k)).collect(),
@@ -86,7 +90,7 @@ pub(crate) fn prescribed(grid: &Grid, dirichlet: &[GridDirichlet], dlambda: f64)
             }
         }
     }
-    prescribed
+    Ok(prescribed)
 }
 
 /// The cells a point's basis reaches into, each with the fraction of its
@@ -270,7 +274,7 @@ impl Mapping {
             node_dof: try_with_capacity(grid.num_nodes(), "the dof map")?,
             ..DofMap::default()
         };
-        dofs.number(&active, &prescribed(grid, dirichlet, dlambda));
+        dofs.number(&active, &prescribed(grid, dirichlet, dlambda)?);
         Ok(Mapping {
             stencils,
             groups,

@@ -685,7 +685,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
         weights,
     } = ws;
     let basis: Vec<_> = sim.model.bodies.iter().map(|b| b.basis).collect();
-    transfer::cache_weights(grid, &sim.state.points, &basis, weights);
+    transfer::cache_weights(grid, &sim.state.points, &basis, weights).map_err(|e| e.at_step(step))?;
     let bodies = Bodies {
         basis,
         material: sim
@@ -696,7 +696,8 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
             .collect(),
         cached: weights,
     };
-    tr.prepare(grid, &sim.model.dirichlet, sim.state.points.len());
+    tr.prepare(grid, &sim.model.dirichlet, sim.state.points.len())
+        .map_err(|e| e.at_step(step))?;
 
     // 1. Map points: the lumped mass needs only the dofs and the active
     // cells (found by the point-to-grid pass); the consistent ones their

@@ -304,14 +304,29 @@ pub type LuFactor = Lu<usize, f64>;
 
 /// Symbolic LU analysis of a pattern, reused across Newton iterations.
 pub fn lu_symbolic(a: &SparseColMat<usize, f64>) -> Result<SymbolicLu<usize>, FactorError> {
-    SymbolicLu::try_new(a.symbolic()).map_err(|e| FactorError::Other(format!("{e:?}")))
+    SymbolicLu::try_new(a.symbolic()).map_err(|e| match e {
+        faer::sparse::FaerError::OutOfMemory => {
+            FactorError::allocation(format!("the symbolic LU analysis of {} unknowns", a.nrows()), 0)
+        }
+        e => FactorError::Other(format!("{e:?}")),
+    })
 }
 
 /// Numeric LU with a symbolic analysis of the same pattern. A structurally
-/// singular matrix or a factor with non-finite entries is an error.
-pub fn lu(symbolic: &SymbolicLu<usize>, a: &SparseColMat<usize, f64>) -> Result<LuFactor, FactorError> {
+/// singular matrix or a factor with non-finite entries is an error. faer
+/// reserves the factor's memory fallibly as partial pivoting grows it; a
+/// reservation that fails is a memory failure naming `what` (the factor,
+/// `bytes` its estimate before pivoting), not an abort.
+pub fn lu(
+    symbolic: &SymbolicLu<usize>,
+    a: &SparseColMat<usize, f64>,
+    what: impl FnOnce() -> String,
+    bytes: u64,
+) -> Result<LuFactor, FactorError> {
+    use faer::sparse::linalg::LuError;
     let f = Lu::try_new_with_symbolic(symbolic.clone(), a.as_ref()).map_err(|e| match e {
-        faer::sparse::linalg::LuError::SymbolicSingular { index } => FactorError::NotPositiveDefinite { pivot: index },
+        LuError::SymbolicSingular { index } => FactorError::NotPositiveDefinite { pivot: index },
+        LuError::Generic(faer::sparse::FaerError::OutOfMemory) => FactorError::allocation(what(), bytes as usize),
         other => FactorError::Other(format!("{other:?}")),
     })?;
     Ok(f)

@@ -159,7 +159,12 @@ fn whole_lu(s: &SymbolicCholesky<usize>, a: &SparseColMat<usize, f64>, budget: u
     let e = lu_estimate(s, 2 * a.compute_nnz());
     linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
     let whole = symmetrised(a)?;
-    Ok(Factor::Lu(linalg::lu(&linalg::lu_symbolic(&whole)?, &whole)?))
+    Ok(Factor::Lu(linalg::lu(
+        &linalg::lu_symbolic(&whole)?,
+        &whole,
+        || e.what.clone(),
+        e.bytes,
+    )?))
 }
 
 impl Factorisation {
@@ -176,7 +181,7 @@ impl Factorisation {
         let s = match symbolic {
             Symbolic::Lu(s, _) => {
                 return Ok(Factorisation {
-                    kind: Factor::Lu(linalg::lu(s, a)?),
+                    kind: Factor::Lu(linalg::lu(s, a, || e.what.clone(), e.bytes)?),
                     negative_pivots: None,
                     budget,
                 })

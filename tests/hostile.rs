@@ -1915,6 +1915,67 @@ mass = "lumped"
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[test]
+fn an_lu_factor_that_cannot_be_allocated_is_a_step_failure() {
+    // F-bar makes the tangent non-symmetric, so Newton factorises it by LU,
+    // whose fill faer grows during the numeric factorisation as partial
+    // pivoting decides. With the budget lifted and `ulimit -v` 250 MB, the
+    // 60,300-unknown block fits (about 160 MB resident) but its LU factor
+    // (194 MB estimated before pivoting) does not: the step fails as out of
+    // memory naming the factor, exit 1, not an abort (134) nor a
+    // "singular system".
+    let dir = temp_path("hostile-ulimit-lu", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("fbar.toml");
+    std::fs::write(
+        &p,
+        r#"[scene]
+name = "fbar-block"
+description = "An F-bar block under its weight, its LU beyond the address space."
+[grid]
+origin = [0.0, 0.0]
+size = [2.0, 2.0]
+h = 0.01
+[[material]]
+name = "soft"
+E = 1.0e6
+nu = 0.3
+density = 1000.0
+[[body]]
+name = "block"
+material = "soft"
+points_per_cell = 1
+region = { shape = "rectangle", min = [0.0, 0.0], max = [2.0, 1.5] }
+[loads]
+gravity = [0.0, -9.81]
+[[dirichlet]]
+kind = "fixed"
+y = 0.0
+[analysis]
+kind = "quasi-static-finite"
+load_steps = 1
+fbar = true
+"#,
+    )
+    .unwrap();
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 250000 && exec \"$0\" run --quiet --max-memory 1T \"$1\"")
+        .arg(env!("CARGO_BIN_EXE_mpmlab"))
+        .arg(&p)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("step 1 failed: out of memory")
+            && err.contains("for the LU factor of 60300 unknowns")
+            && err.contains("could not be allocated"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Mutations of shipped scenes for the property test.
 mod mutate {
     use proptest::prelude::*;

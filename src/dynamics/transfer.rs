@@ -23,6 +23,7 @@ use crate::basis::{weights_1d, BasisKind, Weights1d};
 use crate::geometry::P2;
 use crate::grid::Grid;
 use crate::kinematics::be_matrix;
+use crate::linalg::FactorError;
 use crate::material::hencky::{right_stretch, Hencky};
 use crate::points::Points;
 use nalgebra::Matrix2;
@@ -124,11 +125,23 @@ impl Bodies<'_> {
 /// the passes read them five times a step and GIMP's are dear to
 /// evaluate); without, `out` is left empty: the standard basis is cheaper
 /// to evaluate in the loops than to read back.
-pub(crate) fn cache_weights(grid: &Grid, pts: &Points, basis: &[BasisKind], out: &mut Vec<[Weights1d; 2]>) {
+pub(crate) fn cache_weights(
+    grid: &Grid,
+    pts: &Points,
+    basis: &[BasisKind],
+    out: &mut Vec<[Weights1d; 2]>,
+) -> Result<(), FactorError> {
     out.clear();
     if basis.contains(&BasisKind::Gimp) {
+        out.try_reserve_exact(pts.len()).map_err(|_| {
+            FactorError::allocation(
+                format!("the points' basis factors ({} entries)", pts.len()),
+                pts.len().saturating_mul(std::mem::size_of::<[Weights1d; 2]>()),
+            )
+        })?;
         out.extend((0..pts.len()).map(|p| weights_1d(grid, basis[pts.body[p]], pts.x[p], pts.lp[p])));
     }
+    Ok(())
 }
 
 /// Call `f(node, S_vp, grad S_vp)` for the nodes of a point's stencil in
@@ -157,6 +170,19 @@ pub(crate) fn stencil_weights(grid: &Grid, w: &[Weights1d; 2]) -> (usize, [f64; 
         k += 1;
     });
     (k, out)
+}
+
+/// `v` resized to `n` entries (new ones `value`), its memory reserved
+/// fallibly: a failure names `what`.
+fn grow<T: Clone>(v: &mut Vec<T>, n: usize, value: T, what: &str) -> Result<(), FactorError> {
+    v.try_reserve_exact(n.saturating_sub(v.len())).map_err(|_| {
+        FactorError::allocation(
+            format!("{what} ({n} entries)"),
+            n.saturating_mul(std::mem::size_of::<T>()),
+        )
+    })?;
+    v.resize(n, value);
+    Ok(())
 }
 
 fn reset<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
@@ -414,22 +440,34 @@ fn apply_point(
 impl Transfer {
     /// Size the buffers for `grid` and `n` points (no allocation once
     /// sized) and compute the prescribed components on the first step.
-    pub(crate) fn prepare(&mut self, grid: &Grid, dirichlet: &[crate::model::GridDirichlet], n: usize) {
+    /// Memory that cannot be allocated is an error naming the buffer.
+    pub(crate) fn prepare(
+        &mut self,
+        grid: &Grid,
+        dirichlet: &[crate::model::GridDirichlet],
+        n: usize,
+    ) -> Result<(), FactorError> {
         let nodes = grid.num_nodes();
         if self.prescribed.len() != nodes {
-            self.prescribed = crate::assembly::prescribed(grid, dirichlet, 0.0);
+            self.prescribed = crate::assembly::prescribed(grid, dirichlet, 0.0)?;
         }
         let next = &mut self.next;
-        next.x.resize(n, [0.0; 2]);
-        next.v.resize(n, [0.0; 2]);
-        next.def_grad.resize(n, [0.0; 4]);
-        next.vol.resize(n, 0.0);
-        next.lp.resize(n, [0.0; 2]);
-        next.stress.resize(n, [0.0; 3]);
-        next.szz.resize(n, 0.0);
-        next.b_e.resize(n, [0.0; 4]);
-        next.dissipation.resize(n, 0.0);
-        next.yielding.resize(n, false);
+        grow(&mut next.x, n, [0.0; 2], "the points' next positions")?;
+        grow(&mut next.v, n, [0.0; 2], "the points' next velocities")?;
+        grow(
+            &mut next.def_grad,
+            n,
+            [0.0; 4],
+            "the points' next deformation gradients",
+        )?;
+        grow(&mut next.vol, n, 0.0, "the points' next volumes")?;
+        grow(&mut next.lp, n, [0.0; 2], "the points' next domains")?;
+        grow(&mut next.stress, n, [0.0; 3], "the points' next stresses")?;
+        grow(&mut next.szz, n, 0.0, "the points' next out-of-plane stresses")?;
+        grow(&mut next.b_e, n, [0.0; 4], "the points' next elastic strains")?;
+        grow(&mut next.dissipation, n, 0.0, "the points' next dissipation")?;
+        grow(&mut next.yielding, n, false, "the points' next yield flags")?;
+        Ok(())
     }
 
     /// Point to grid: nodal lumped mass and momentum of `velocities` over
