@@ -56,9 +56,10 @@
 //! the series. The recording is listed under its scene and run
 //! ([`recording_name`]).
 //!
-//! The file is flushed after a step once [`SYNC_PERIOD`] (or
-//! `--record-sync`) has passed, so a killed run leaves every step up to
-//! the last flush; [`repair`] writes the footer rerun adds at close.
+//! The file is flushed after every step while flushing takes at most
+//! [`SYNC_SHARE`] of the run's time, and at the latest once [`SYNC_PERIOD`]
+//! (or `--record-sync`) has passed, so a killed run leaves every step up
+//! to the last flush; [`repair`] writes the footer rerun adds at close.
 //!
 //! The engine knows nothing of this module: it reads reports and state.
 
@@ -149,8 +150,9 @@ enum Job {
     Frame(Frame),
     /// Flush everything logged so far into the file (the frames before it
     /// and whatever the engine's thread logged before sending it), then
-    /// answer with the error, if any.
-    Flush(SyncSender<Option<String>>),
+    /// answer with the error, if any, and the time the flush itself took
+    /// (the frames' logging excluded).
+    Flush(SyncSender<(Option<String>, std::time::Duration)>),
 }
 
 /// The recorder's thread: logs the frames it is sent, returns their
@@ -192,12 +194,13 @@ impl FrameWriter {
                             let _ = spare_tx.send(f);
                         }
                         Job::Flush(done) => {
+                            let t = std::time::Instant::now();
                             if !failed {
                                 if let Err(e) = rec.flush_blocking() {
                                     keep(e.to_string());
                                 }
                             }
-                            let _ = done.send(err.lock().ok().and_then(|e| e.clone()));
+                            let _ = done.send((err.lock().ok().and_then(|e| e.clone()), t.elapsed()));
                         }
                     }
                 }
@@ -217,19 +220,19 @@ impl FrameWriter {
 
     /// Wait until every frame sent and everything logged before this call
     /// is written to the file (handed to the operating system: it survives
-    /// the process being killed).
-    fn sync(&self) -> Option<String> {
+    /// the process being killed). The error, if any, and the time the
+    /// flush itself took (waiting for frames not counted).
+    fn sync(&self) -> (Option<String>, std::time::Duration) {
+        let zero = std::time::Duration::ZERO;
         let Some(tx) = &self.frames else {
-            return self.error();
+            return (self.error(), zero);
         };
+        let stopped = || Some(self.error().unwrap_or_else(|| "the recorder's thread stopped".into()));
         let (done, answer) = mpsc::sync_channel(1);
         if tx.send(Job::Flush(done)).is_err() {
-            return Some(self.error().unwrap_or_else(|| "the recorder's thread stopped".into()));
+            return (stopped(), zero);
         }
-        match answer.recv() {
-            Ok(e) => e,
-            Err(_) => Some(self.error().unwrap_or_else(|| "the recorder's thread stopped".into())),
-        }
+        answer.recv().unwrap_or_else(|_| (stopped(), zero))
     }
 
     /// Wait for every frame sent to be logged.
@@ -495,16 +498,34 @@ pub struct Recorder {
     /// another thread than the one that created the recorder).
     step_now: std::cell::Cell<i64>,
     events: std::cell::Cell<i64>,
-    /// Wall time between flushes into the file ([`Recorder::sync`]) and
-    /// the last one.
+    /// The longest wall time between flushes into the file
+    /// ([`Recorder::sync`]) and the last one.
     sync_period: std::time::Duration,
     last_sync: std::time::Instant,
+    /// The shortest flush so far (its fixed cost; `None` before the
+    /// first): a step is flushed sooner than the period once that cost is
+    /// at most [`SYNC_SHARE`] of the time since the last flush.
+    sync_cost: Option<std::time::Duration>,
 }
 
-/// The default time between flushes of a recording into its file: a
-/// killed run loses at most the steps of the last half second (and every
+/// The default longest time between flushes of a recording into its file:
+/// a killed run loses at most the steps of the last half second (and every
 /// step that took longer is in the file before the run reports it).
 pub const SYNC_PERIOD: std::time::Duration = std::time::Duration::from_millis(500);
+
+/// The share of a run's wall time its recording may spend flushing after
+/// steps that the period does not yet require: within it, every step is
+/// flushed. A flush costs about 2 ms and, in the file, a chunk per entity
+/// (rerun cuts its batches there), so runs of steps longer than about 40 ms
+/// flush every step, and faster ones (explicit dynamics) every few steps.
+pub const SYNC_SHARE: f64 = 0.05;
+
+/// Whether a step ending `since` after the last flush is flushed, with the
+/// longest period `period` and a flush's fixed cost `cost` (`None`: not yet
+/// measured, so the first step is flushed): see [`SYNC_SHARE`].
+fn flush_due(since: std::time::Duration, period: std::time::Duration, cost: Option<std::time::Duration>) -> bool {
+    since >= period || cost.is_none_or(|c| c.as_secs_f64() <= SYNC_SHARE * since.as_secs_f64())
+}
 
 /// The rerun version the recordings are written with; viewers read their
 /// own and the previous minor version only.
@@ -598,6 +619,7 @@ impl Recorder {
             events: std::cell::Cell::new(0),
             sync_period: SYNC_PERIOD,
             last_sync: std::time::Instant::now(),
+            sync_cost: None,
         };
         let contents = contents(sim, colour);
         r.check(
@@ -945,14 +967,22 @@ impl Recorder {
         if self.plan.holds_points(report.step) {
             self.log_state(sim)?;
         }
-        if self.last_sync.elapsed() >= self.sync_period {
+        if self.sync_due() {
             self.sync()?;
         }
         Ok(())
     }
 
-    /// The wall time between flushes into the file after a step
-    /// ([`SYNC_PERIOD`] by default; zero: after every step).
+    /// Whether to flush after a step: once the period has passed since the
+    /// last flush, or sooner once a flush's fixed cost (the shortest one
+    /// so far) is at most [`SYNC_SHARE`] of the time since the last one.
+    fn sync_due(&self) -> bool {
+        flush_due(self.last_sync.elapsed(), self.sync_period, self.sync_cost)
+    }
+
+    /// The longest wall time between flushes into the file after a step
+    /// ([`SYNC_PERIOD`] by default; zero: after every step). Steps are
+    /// flushed sooner while flushing costs little ([`SYNC_SHARE`]).
     pub fn set_sync_period(&mut self, period: std::time::Duration) {
         self.sync_period = period;
     }
@@ -962,11 +992,14 @@ impl Recorder {
     /// footer, which `mpmlab repair` adds: [`repair`]). It costs a few
     /// milliseconds and, in the file, a chunk per entity (about a
     /// kilobyte each): rerun cuts its batches at each call. Steps call it
-    /// once [`Recorder::set_sync_period`] has passed since the last one;
-    /// failures always.
+    /// while it costs little, and at the latest once
+    /// [`Recorder::set_sync_period`] has passed since the last one
+    /// ([`Recorder::sync_due`]); failures always.
     pub fn sync(&mut self) -> Result<(), RecordError> {
+        let (result, cost) = self.writer.sync();
         self.last_sync = std::time::Instant::now();
-        match self.writer.sync() {
+        self.sync_cost = Some(self.sync_cost.map_or(cost, |c| c.min(cost)));
+        match result {
             None => Ok(()),
             Some(message) => Err(RecordError::Write {
                 path: self.path.clone(),
@@ -1115,5 +1148,27 @@ impl crate::runner::Observer for Recorder {
     }
     fn note(&mut self, text: &str, level: &str) -> Option<String> {
         self.event(text, level).err().map(|e| format!("recording stopped: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn steps_are_flushed_while_flushing_costs_at_most_its_share() {
+        let ms = Duration::from_millis;
+        // The first step is flushed, before any cost is known.
+        assert!(flush_due(ms(1), SYNC_PERIOD, None));
+        // A 3 ms flush is 5% of 60 ms: a step ending 60 ms after the last
+        // flush is flushed, one ending 50 ms after it is not yet.
+        assert!(flush_due(ms(60), SYNC_PERIOD, Some(ms(3))));
+        assert!(!flush_due(ms(50), SYNC_PERIOD, Some(ms(3))));
+        // A costly flush waits for the period, and no longer.
+        assert!(!flush_due(ms(499), SYNC_PERIOD, Some(ms(100))));
+        assert!(flush_due(ms(500), SYNC_PERIOD, Some(ms(100))));
+        // Period 0 (`--record-sync 0`): every step, whatever it costs.
+        assert!(flush_due(ms(0), Duration::ZERO, Some(ms(100))));
     }
 }
