@@ -18,11 +18,12 @@
 //! `dc_p = (c_p/2) (sum_q v_q J_q dF_q^-T : d dF_q / (J_bar V) - dF_p^-T : d dF_p)`.
 //! Points inside an implicit boundary's band stay out of the patches.
 
-use crate::assembly::{Dof, Mapping, Pattern};
+use crate::assembly::{try_filled, try_with_capacity, Dof, Mapping, Pattern};
 use crate::geometry::P2;
 use crate::ghost::GhostFace;
 use crate::ibm::GradOp;
 use crate::kinematics::{be_matrix, increment_gradient};
+use crate::linalg::FactorError;
 use crate::material::hencky::Response;
 use crate::state::Simulation;
 use faer::sparse::SparseColMat;
@@ -62,12 +63,22 @@ pub(crate) type BandView<'a> = (&'a [Option<Vec<GradOp>>], &'a [P2], &'a [P2]);
 /// Material response and internal force of the points for nodal
 /// increments `total` (`d + d^a`), with the in-band points' operators
 /// `ops` acting on the unknowns `d` (and `grad(S d^a)`).
-pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band: Option<BandView>) -> Iterate {
+/// Its per-point and per-dof buffers are reserved fallibly: memory that
+/// cannot be had is an error naming them, not an abort.
+pub(crate) fn evaluate_with(
+    sim: &Simulation,
+    map: &Mapping,
+    total: &[P2],
+    band: Option<BandView>,
+) -> Result<Iterate, FactorError> {
     let pts = &sim.state.points;
     let in_band = |p: usize| band.is_some_and(|(ops, _, _)| ops[p].is_some());
     // F-bar: each group's volume-weighted mean J of its points' dF.
-    let fbar = sim.model.analysis.fbar.then(|| {
-        let mut c = vec![None; pts.len()];
+    let fbar_c = match sim.model.analysis.fbar {
+        true => Some(try_filled(pts.len(), None, "the points' F-bar factors")?),
+        false => None,
+    };
+    let fbar = fbar_c.map(|mut c| {
         let groups: Vec<(f64, f64)> = map
             .groups
             .iter()
@@ -93,12 +104,13 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
         (c, groups)
     });
     let mut it = Iterate {
-        responses: Vec::with_capacity(pts.len()),
-        fint_free: vec![0.0; map.dofs.n_free],
-        fint_fixed: vec![0.0; map.dofs.constrained.len()],
-        fbar: fbar.as_ref().map(|(_, g)| (vec![None; pts.len()], g.clone())),
+        responses: try_with_capacity(pts.len(), "the points' material responses")?,
+        fint_free: try_filled(map.dofs.n_free, 0.0, "the internal forces")?,
+        fint_fixed: try_filled(map.dofs.constrained.len(), 0.0, "the reactions")?,
+        fbar: None,
     };
-    let mut fbar_points: Vec<Option<FbarPoint>> = vec![None; if fbar.is_some() { pts.len() } else { 0 }];
+    let n_fbar = if fbar.is_some() { pts.len() } else { 0 };
+    let mut fbar_points: Vec<Option<FbarPoint>> = try_filled(n_fbar, None, "the points' F-bar operators")?;
     let mut add = |n: usize, i: usize, f: f64| match map.dofs.node_dof[n][i] {
         Dof::Free(k) => it.fint_free[k] += f,
         Dof::Fixed(k) => it.fint_fixed[k] += f,
@@ -172,10 +184,8 @@ pub(crate) fn evaluate_with(sim: &Simulation, map: &Mapping, total: &[P2], band:
         };
         it.responses.push(Some(r));
     }
-    if let Some((f, _)) = it.fbar.as_mut() {
-        *f = fbar_points;
-    }
-    it
+    it.fbar = fbar.map(|(_, g)| (fbar_points, g));
+    Ok(it)
 }
 
 /// `dF = I + sum_k sum_l d_kl G_k[l] + grad(S d^a)` of a point inside a
@@ -197,7 +207,7 @@ pub(crate) fn band_gradient(st: crate::basis::StencilView, ops: &[GradOp], d: &[
 
 /// Material response and internal force for nodal increments `du`
 /// (no implicit boundaries).
-pub(crate) fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Iterate {
+pub(crate) fn evaluate(sim: &Simulation, map: &Mapping, du: &[P2]) -> Result<Iterate, FactorError> {
     evaluate_with(sim, map, du, None)
 }
 

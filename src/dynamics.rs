@@ -1140,7 +1140,7 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
     // without the ghost term.
     let full = Pattern::new(&map.dofs, &blocks, Storage::Full)?;
     let zero = vec![[0.0; 2]; map.dofs.node_dof.len()];
-    let it = crate::bulk::evaluate(sim, map, &zero);
+    let it = crate::bulk::evaluate(sim, map, &zero)?;
     let k = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, 0.0)?;
     let ks = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k)?;
     let h = sim.model.grid.h;
@@ -1185,7 +1185,7 @@ pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::Fac
     let mut c = conditioning_on(sim, &map, &faces)?;
     let blocks = blocks_of(&map, &faces);
     let lower = Pattern::new(&map.dofs, &blocks, Storage::Lower)?;
-    let it = crate::bulk::evaluate(sim, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()]);
+    let it = crate::bulk::evaluate(sim, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()])?;
     let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
     let k = |gamma: f64| crate::bulk::tangent(sim, &map, &lower, &blocks, &faces, &it, gamma);
     c.stiffness = Some(spd_condition(&k(0.0)?, mode, limit).0);

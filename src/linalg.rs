@@ -475,21 +475,43 @@ pub struct Condition {
     pub method: ConditionMethod,
 }
 
+/// Run one small dense product on this thread, so that the matrix-product
+/// kernels allocate their per-thread packing buffer (a few MB, which they
+/// cannot reserve fallibly) now, while memory is plentiful, rather than in
+/// the middle of a step's factorisation or eigenvalues, where failing to
+/// get it would abort the process.
+pub fn warm_dense_kernels() {
+    let a = Mat::<f64>::from_fn(96, 96, |i, j| if i == j { 1.0 } else { 0.0 });
+    let mut c = Mat::<f64>::zeros(96, 96);
+    faer::linalg::matmul::matmul(c.as_mut(), faer::Accum::Replace, a.as_ref(), a.as_ref(), 1.0, Par::Seq);
+    std::hint::black_box(&c);
+}
+
 /// Eigenvalues (ascending) of a symmetric matrix given by its lower triangle,
-/// densely.
+/// densely; `None` when they fail to converge or their memory (the dense
+/// matrix and faer's workspace, reserved fallibly) cannot be had: the
+/// callers then use Lanczos, which needs no dense matrix.
 pub fn dense_eigenvalues(a: &SparseColMat<usize, f64>) -> Option<Vec<f64>> {
+    use faer::linalg::evd;
     let n = a.nrows();
-    let mut m = Mat::<f64>::zeros(n, n);
+    let mut data: Vec<f64> = Vec::new();
+    data.try_reserve_exact(n.checked_mul(n)?).ok()?;
+    data.resize(n * n, 0.0);
     let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
     for c in 0..n {
         for k in cp[c]..cp[c + 1] {
-            m[(ri[k], c)] += v[k];
+            data[c * n + ri[k]] += v[k];
             if ri[k] != c {
-                m[(c, ri[k])] += v[k];
+                data[ri[k] * n + c] += v[k];
             }
         }
     }
-    m.self_adjoint_eigenvalues(Side::Lower).ok()
+    let m = faer::MatRef::from_column_major_slice(&data, n, n);
+    let req = evd::self_adjoint_evd_scratch::<f64>(n, evd::ComputeEigenvectors::No, par(), Default::default());
+    let mut mem = MemBuffer::try_new(req).ok()?;
+    let mut s = faer::diag::Diag::<f64>::zeros(n);
+    evd::self_adjoint_evd(m, s.as_mut(), None, par(), MemStack::new(&mut mem), Default::default()).ok()?;
+    Some(s.column_vector().iter().copied().collect())
 }
 
 /// Iterations of each Lanczos run of [`ConditionMethod::Estimate`] at most.

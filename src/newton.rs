@@ -375,7 +375,8 @@ impl<'a> Setup<'a> {
                     .collect();
                 evaluate_with(self.sim, map, &total, Some((&b.ops, d, &b.step.da)))
             }
-        };
+        }
+        .map_err(|e| e.at_step(self.step))?;
         let mut fext = self.dead.clone();
         for l in &self.loads {
             let b = &self.sim.model.boundaries[l.boundary];
@@ -906,7 +907,7 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
         // Out-of-balance of the points at the start (zero increment) and
         // the end of the step: the implicit boundaries' reactions.
         let zero = vec![[0.0; 2]; d.len()];
-        let it0 = evaluate_with(sim, map, &zero, Some((&b.ops, &zero, &zero)));
+        let it0 = evaluate_with(sim, map, &zero, Some((&b.ops, &zero, &zero))).map_err(|e| e.at_step(setup.step))?;
         // At grid-held dofs the internal force: a node shared with a grid
         // support splits it with that support (`IbmStep::reports`).
         let per_node = |fint: &[f64], fixed: &[f64], ext: &dyn Fn(usize) -> f64| {

@@ -88,6 +88,7 @@ impl Simulation {
     /// The simulation of `model` at its start; the model's points move
     /// into the state (one copy of the points, not two).
     pub fn new(mut model: Model) -> Simulation {
+        crate::linalg::warm_dense_kernels();
         let params = Params {
             tolerance: model.analysis.tolerance,
             condition: model.analysis.condition,

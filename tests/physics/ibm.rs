@@ -344,7 +344,12 @@ fn rigid_footing_is_pushed_in_without_points_crossing_it() {
         // The footing's 1 m in 20 increments of 50 mm is imposed exactly on
         // it (D = 0 there, C (16)): the reported violation of each step's
         // increment is round-off (measured 6.9e-18 m).
-        assert!(r.ibm[0].violation < 1e-9, "step {}: violation {:e}", r.step, r.ibm[0].violation);
+        assert!(
+            r.ibm[0].violation < 1e-9,
+            "step {}: violation {:e}",
+            r.step,
+            r.ibm[0].violation
+        );
         let footing = &sim.ibm_boundaries()[0];
         let y = footing.points[0][1];
         let pts = sim.points();
