@@ -480,7 +480,12 @@ pub struct Condition {
 /// cannot reserve fallibly) now, while memory is plentiful, rather than in
 /// the middle of a step's factorisation or eigenvalues, where failing to
 /// get it would abort the process.
+/// Skipped when 16 MB cannot be reserved: the warm-up would itself abort,
+/// and a run that needs no large dense product can still finish.
 pub fn warm_dense_kernels() {
+    if Vec::<u8>::new().try_reserve_exact(16 << 20).is_err() {
+        return;
+    }
     let a = Mat::<f64>::from_fn(96, 96, |i, j| if i == j { 1.0 } else { 0.0 });
     let mut c = Mat::<f64>::zeros(96, 96);
     faer::linalg::matmul::matmul(c.as_mut(), faer::Accum::Replace, a.as_ref(), a.as_ref(), 1.0, Par::Seq);

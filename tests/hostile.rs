@@ -1976,6 +1976,103 @@ fbar = true
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[test]
+fn no_memory_limit_makes_a_run_abort_or_hang() {
+    // Three scenes whose memory crosses 30-94 MB (measured), each run under
+    // `ulimit -v` at eight limits across that range, with backtraces on
+    // (a panic that prints one while memory is short once deadlocked in the
+    // standard library): Newton with ghost (the G 5.5 beam at h = 0.0625),
+    // a linear step with dense eigenvalues (the slender cantilever), and a
+    // non-symmetric F-bar step factorised by LU. Every run must end with
+    // exit 0, 1 (a step failure, reported) or 2 (refused), within 60 s:
+    // before the fallible residual buffers, dense eigenvalues and the
+    // kernels' warm-up, three of these ended in SIGABRT (134) and one hung.
+    let dir = temp_path("hostile-ulimit-sweep", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenes = dir.join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    let with_h = |name: &str, h: Option<&str>| {
+        let text = std::fs::read_to_string(scene_path(name)).unwrap();
+        let text = match h {
+            Some(h) => text
+                .lines()
+                .map(|l| {
+                    if l.starts_with("h = ") {
+                        format!("h = {h}")
+                    } else {
+                        l.to_string()
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n"),
+            None => text,
+        };
+        let p = scenes.join(format!("{name}.toml"));
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let fbar = scenes.join("fbar.toml");
+    std::fs::write(
+        &fbar,
+        r#"[scene]
+name = "fbar-block"
+description = "An F-bar block under its weight."
+[grid]
+origin = [0.0, 0.0]
+size = [2.0, 2.0]
+h = 0.02
+[[material]]
+name = "soft"
+E = 1.0e6
+nu = 0.3
+density = 1000.0
+[[body]]
+name = "block"
+material = "soft"
+points_per_cell = 1
+region = { shape = "rectangle", min = [0.0, 0.0], max = [2.0, 1.5] }
+[loads]
+gravity = [0.0, -9.81]
+[[dirichlet]]
+kind = "fixed"
+y = 0.0
+[analysis]
+kind = "quasi-static-finite"
+load_steps = 1
+fbar = true
+"#,
+    )
+    .unwrap();
+    let runs = [
+        with_h("elastic-beam-ghost", Some("0.0625")),
+        with_h("slender-cantilever-0", None),
+        fbar,
+    ];
+    let mut bad = Vec::new();
+    for scene in &runs {
+        for kb in (30_000..=86_000).step_by(8_000) {
+            let o = std::process::Command::new("timeout")
+                .args(["60", "sh", "-c"])
+                .arg(format!(
+                    "ulimit -v {kb} && exec \"$0\" run --quiet --max-memory 1T \"$1\""
+                ))
+                .arg(env!("CARGO_BIN_EXE_mpmlab"))
+                .arg(scene)
+                .env("RUST_BACKTRACE", "1")
+                .output()
+                .unwrap();
+            let code = o.status.code();
+            if !matches!(code, Some(0..=2)) {
+                let err = String::from_utf8_lossy(&o.stderr);
+                let last = err.lines().last().unwrap_or("").to_string();
+                bad.push(format!("{} at {kb} kB: exit {code:?}: {last}", scene.display()));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Mutations of shipped scenes for the property test.
 mod mutate {
     use proptest::prelude::*;
