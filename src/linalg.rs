@@ -303,7 +303,23 @@ pub fn sym_lower_mul(a: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
 pub type LuFactor = Lu<usize, f64>;
 
 /// Symbolic LU analysis of a pattern, reused across Newton iterations.
+/// faer reserves its workspace fallibly but allocates COLAMD's elimination
+/// tree and postorder (`n` indices each) infallibly: twice the memory the
+/// analysis takes is reserved and released first, so that a process short
+/// of it gets an error here rather than an abort inside faer.
 pub fn lu_symbolic(a: &SparseColMat<usize, f64>) -> Result<SymbolicLu<usize>, FactorError> {
+    let (m, n, nnz) = (a.nrows(), a.ncols(), a.compute_nnz());
+    let scratch = faer::sparse::linalg::colamd::order_scratch::<usize>(m, n, nnz).size_bytes();
+    let probe = scratch
+        .saturating_add(8 * (m + 1 + nnz))
+        .saturating_add(8 * 16 * m.max(n))
+        .saturating_mul(2);
+    if Vec::<u8>::new().try_reserve_exact(probe).is_err() {
+        return Err(FactorError::allocation(
+            format!("the symbolic LU analysis of {n} unknowns"),
+            probe,
+        ));
+    }
     SymbolicLu::try_new(a.symbolic()).map_err(|e| match e {
         faer::sparse::FaerError::OutOfMemory => {
             FactorError::allocation(format!("the symbolic LU analysis of {} unknowns", a.nrows()), 0)

@@ -1915,6 +1915,40 @@ mass = "lumped"
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A block under its weight on a fixed base, its finite-deformation
+/// tangent made non-symmetric by F-bar (so factorised by LU), cells `h` m.
+fn fbar_block(h: &str) -> String {
+    format!(
+        r#"[scene]
+name = "fbar-block"
+description = "An F-bar block under its weight."
+[grid]
+origin = [0.0, 0.0]
+size = [2.0, 2.0]
+h = {h}
+[[material]]
+name = "soft"
+E = 1.0e6
+nu = 0.3
+density = 1000.0
+[[body]]
+name = "block"
+material = "soft"
+points_per_cell = 1
+region = {{ shape = "rectangle", min = [0.0, 0.0], max = [2.0, 1.5] }}
+[loads]
+gravity = [0.0, -9.81]
+[[dirichlet]]
+kind = "fixed"
+y = 0.0
+[analysis]
+kind = "quasi-static-finite"
+load_steps = 1
+fbar = true
+"#
+    )
+}
+
 #[test]
 fn an_lu_factor_that_cannot_be_allocated_is_a_step_failure() {
     // F-bar makes the tangent non-symmetric, so Newton factorises it by LU,
@@ -1927,37 +1961,7 @@ fn an_lu_factor_that_cannot_be_allocated_is_a_step_failure() {
     let dir = temp_path("hostile-ulimit-lu", "d");
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join("fbar.toml");
-    std::fs::write(
-        &p,
-        r#"[scene]
-name = "fbar-block"
-description = "An F-bar block under its weight, its LU beyond the address space."
-[grid]
-origin = [0.0, 0.0]
-size = [2.0, 2.0]
-h = 0.01
-[[material]]
-name = "soft"
-E = 1.0e6
-nu = 0.3
-density = 1000.0
-[[body]]
-name = "block"
-material = "soft"
-points_per_cell = 1
-region = { shape = "rectangle", min = [0.0, 0.0], max = [2.0, 1.5] }
-[loads]
-gravity = [0.0, -9.81]
-[[dirichlet]]
-kind = "fixed"
-y = 0.0
-[analysis]
-kind = "quasi-static-finite"
-load_steps = 1
-fbar = true
-"#,
-    )
-    .unwrap();
+    std::fs::write(&p, fbar_block("0.01")).unwrap();
     let o = std::process::Command::new("sh")
         .arg("-c")
         .arg("ulimit -v 250000 && exec \"$0\" run --quiet --max-memory 1T \"$1\"")
@@ -2012,37 +2016,7 @@ fn no_memory_limit_makes_a_run_abort_or_hang() {
         p
     };
     let fbar = scenes.join("fbar.toml");
-    std::fs::write(
-        &fbar,
-        r#"[scene]
-name = "fbar-block"
-description = "An F-bar block under its weight."
-[grid]
-origin = [0.0, 0.0]
-size = [2.0, 2.0]
-h = 0.02
-[[material]]
-name = "soft"
-E = 1.0e6
-nu = 0.3
-density = 1000.0
-[[body]]
-name = "block"
-material = "soft"
-points_per_cell = 1
-region = { shape = "rectangle", min = [0.0, 0.0], max = [2.0, 1.5] }
-[loads]
-gravity = [0.0, -9.81]
-[[dirichlet]]
-kind = "fixed"
-y = 0.0
-[analysis]
-kind = "quasi-static-finite"
-load_steps = 1
-fbar = true
-"#,
-    )
-    .unwrap();
+    std::fs::write(&fbar, fbar_block("0.02")).unwrap();
     let runs = [
         with_h("elastic-beam-ghost", Some("0.0625")),
         with_h("slender-cantilever-0", None),
@@ -2064,8 +2038,9 @@ fbar = true
             let code = o.status.code();
             if !matches!(code, Some(0..=2)) {
                 let err = String::from_utf8_lossy(&o.stderr);
-                let last = err.lines().last().unwrap_or("").to_string();
-                bad.push(format!("{} at {kb} kB: exit {code:?}: {last}", scene.display()));
+                let lines: Vec<&str> = err.lines().filter(|l| !l.starts_with("  ")).collect();
+                let tail = lines[lines.len().saturating_sub(12)..].join("\n    ");
+                bad.push(format!("{} at {kb} kB: {:?}:\n    {tail}", scene.display(), o.status));
             }
         }
     }

@@ -214,6 +214,53 @@ fn translating_domain_mass_conditioning() {
 }
 
 /// `(1/(nt W0)) sum_i |W_kin,i + W_eps,i - W0|` (G 5.2).
+#[test]
+fn cfl_number_of_one_cell_is_half_the_inverse_wave_speed() {
+    // One cell of side h with one point at its centre (volume V, mass
+    // rho V), nu = 0: the gradients there are (+-1, +-1)/(2h), so
+    // B B^T = diag(1, 1, 2)/h^2 and, with D = E diag(1, 1, 1/2),
+    // lambda_max(K) = E V/h^2 (threefold). The lumped mass puts rho V/4 on
+    // each node, so lambda_max(K, M_L) = 4E/(rho h^2) and G 3.5's CFL
+    // number C = 1/(h sqrt(lambda_max)) = sqrt(rho/E)/2 = 1/(2c), whatever
+    // h. The three eigenvalues are equal, so the power iteration has
+    // nothing to separate: the reported number is exact to round-off.
+    for (h, e, rho) in [(1.0f64, 4.0f64, 1.0f64), (0.5, 4.0, 1.0), (0.25, 1.0e3, 2.5)] {
+        let text = format!(
+            r#"[scene]
+name = "one-cell"
+description = "One cell, one point at its centre."
+[grid]
+origin = [0.0, 0.0]
+size = [{size}, {size}]
+h = {h}
+[[material]]
+name = "m"
+E = {e}
+nu = 0.0
+density = {rho}
+[[body]]
+name = "b"
+material = "m"
+points_per_cell = 1
+region = {{ shape = "rectangle", min = [{h}, {h}], max = [{two_h}, {two_h}] }}
+[analysis]
+kind = "explicit-dynamics"
+duration = 0.001
+load_steps = 1
+mass = "lumped"
+"#,
+            size = 3.0 * h,
+            two_h = 2.0 * h,
+        );
+        let scene = mpmlab::scene::Scene::parse(&text, "one-cell").unwrap();
+        let sim = Simulation::new(mpmlab::Model::build(&scene, &text, "one-cell").unwrap());
+        let c = sim.conditioning().unwrap().cfl_lumped.unwrap();
+        let exact = 0.5 * (rho / e).sqrt();
+        println!("h = {h}, E = {e}, rho = {rho}: CFL {c:.15e}, exact {exact:.15e}");
+        assert!((c - exact).abs() < 1e-12 * exact, "h = {h}: {c} against {exact}");
+    }
+}
+
 fn mean_energy_error(reports: &[mpmlab::StepReport]) -> f64 {
     let w0 = reports[0].dynamics.as_ref().unwrap().initial_energy;
     reports
