@@ -56,8 +56,8 @@
 //! the series. The recording is listed under its scene and run
 //! ([`recording_name`]).
 //!
-//! The file is flushed after every step while flushing takes at most
-//! [`SYNC_SHARE`] of the run's time, and at the latest once [`SYNC_PERIOD`]
+//! The file is flushed after every step while a flush's fixed cost is at
+//! most [`SYNC_SHARE`] of the time since the last one, and at the latest once [`SYNC_PERIOD`]
 //! (or `--record-sync`) has passed, so a killed run leaves every step up
 //! to the last flush; [`repair`] writes the footer rerun adds at close.
 //!
@@ -515,9 +515,9 @@ pub const SYNC_PERIOD: std::time::Duration = std::time::Duration::from_millis(50
 
 /// The share of a run's wall time its recording may spend flushing after
 /// steps that the period does not yet require: within it, every step is
-/// flushed. A flush costs about 2 ms and, in the file, a chunk per entity
-/// (rerun cuts its batches there), so runs of steps longer than about 40 ms
-/// flush every step, and faster ones (explicit dynamics) every few steps.
+/// flushed. A flush costs about 3 ms and, in the file, a chunk per entity
+/// (rerun cuts its batches there), so runs of steps longer than about 60 ms
+/// flush every step, and faster ones (explicit dynamics) every 60 ms or so.
 pub const SYNC_SHARE: f64 = 0.05;
 
 /// Whether a step ending `since` after the last flush is flushed, with the
