@@ -543,8 +543,8 @@ impl Pattern {
 
 /// `n` copies of `value`, or the failure to allocate them for `what`.
 pub(crate) fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>, FactorError> {
-    let mut v = try_with_capacity(n, what)?;
-    v.resize(n, value);
+    let mut v = Vec::new();
+    try_resize(&mut v, n, value, what)?;
     Ok(v)
 }
 
@@ -552,13 +552,27 @@ pub(crate) fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec
 /// it for `what`.
 pub(crate) fn try_with_capacity<T>(n: usize, what: &str) -> Result<Vec<T>, FactorError> {
     let mut v = Vec::new();
-    v.try_reserve_exact(n).map_err(|_| {
+    try_room(&mut v, n, what)?;
+    Ok(v)
+}
+
+/// Room in `v` for `n` entries in all, reserved fallibly: a failure names
+/// `what`.
+pub(crate) fn try_room<T>(v: &mut Vec<T>, n: usize, what: &str) -> Result<(), FactorError> {
+    v.try_reserve_exact(n.saturating_sub(v.len())).map_err(|_| {
         FactorError::allocation(
             format!("{what} ({n} entries)"),
             n.saturating_mul(std::mem::size_of::<T>()),
         )
-    })?;
-    Ok(v)
+    })
+}
+
+/// `v` resized to `n` entries (new ones `value`), its memory reserved
+/// fallibly ([`try_room`]).
+pub(crate) fn try_resize<T: Clone>(v: &mut Vec<T>, n: usize, value: T, what: &str) -> Result<(), FactorError> {
+    try_room(v, n, what)?;
+    v.resize(n, value);
+    Ok(())
 }
 
 /// A copy of `xs`, or the failure to allocate it for `what`.

@@ -18,7 +18,7 @@
 //! ([`Transfer::swap_points`]): a failed step leaves the last good state
 //! without copying it first.
 
-use crate::assembly::{reached_cells, Dof, DofMap, Mapping};
+use crate::assembly::{reached_cells, try_resize, try_room, Dof, DofMap, Mapping};
 use crate::basis::{weights_1d, BasisKind, Weights1d};
 use crate::geometry::P2;
 use crate::grid::Grid;
@@ -133,12 +133,7 @@ pub(crate) fn cache_weights(
 ) -> Result<(), FactorError> {
     out.clear();
     if basis.contains(&BasisKind::Gimp) {
-        out.try_reserve_exact(pts.len()).map_err(|_| {
-            FactorError::allocation(
-                format!("the points' basis factors ({} entries)", pts.len()),
-                pts.len().saturating_mul(std::mem::size_of::<[Weights1d; 2]>()),
-            )
-        })?;
+        try_room(out, pts.len(), "the points' basis factors")?;
         out.extend((0..pts.len()).map(|p| weights_1d(grid, basis[pts.body[p]], pts.x[p], pts.lp[p])));
     }
     Ok(())
@@ -170,19 +165,6 @@ pub(crate) fn stencil_weights(grid: &Grid, w: &[Weights1d; 2]) -> (usize, [f64; 
         k += 1;
     });
     (k, out)
-}
-
-/// `v` resized to `n` entries (new ones `value`), its memory reserved
-/// fallibly: a failure names `what`.
-fn grow<T: Clone>(v: &mut Vec<T>, n: usize, value: T, what: &str) -> Result<(), FactorError> {
-    v.try_reserve_exact(n.saturating_sub(v.len())).map_err(|_| {
-        FactorError::allocation(
-            format!("{what} ({n} entries)"),
-            n.saturating_mul(std::mem::size_of::<T>()),
-        )
-    })?;
-    v.resize(n, value);
-    Ok(())
 }
 
 fn reset<T: Copy>(v: &mut Vec<T>, len: usize, value: T) {
@@ -452,21 +434,21 @@ impl Transfer {
             self.prescribed = crate::assembly::prescribed(grid, dirichlet, 0.0)?;
         }
         let next = &mut self.next;
-        grow(&mut next.x, n, [0.0; 2], "the points' next positions")?;
-        grow(&mut next.v, n, [0.0; 2], "the points' next velocities")?;
-        grow(
+        try_resize(&mut next.x, n, [0.0; 2], "the points' next positions")?;
+        try_resize(&mut next.v, n, [0.0; 2], "the points' next velocities")?;
+        try_resize(
             &mut next.def_grad,
             n,
             [0.0; 4],
             "the points' next deformation gradients",
         )?;
-        grow(&mut next.vol, n, 0.0, "the points' next volumes")?;
-        grow(&mut next.lp, n, [0.0; 2], "the points' next domains")?;
-        grow(&mut next.stress, n, [0.0; 3], "the points' next stresses")?;
-        grow(&mut next.szz, n, 0.0, "the points' next out-of-plane stresses")?;
-        grow(&mut next.b_e, n, [0.0; 4], "the points' next elastic strains")?;
-        grow(&mut next.dissipation, n, 0.0, "the points' next dissipation")?;
-        grow(&mut next.yielding, n, false, "the points' next yield flags")?;
+        try_resize(&mut next.vol, n, 0.0, "the points' next volumes")?;
+        try_resize(&mut next.lp, n, [0.0; 2], "the points' next domains")?;
+        try_resize(&mut next.stress, n, [0.0; 3], "the points' next stresses")?;
+        try_resize(&mut next.szz, n, 0.0, "the points' next out-of-plane stresses")?;
+        try_resize(&mut next.b_e, n, [0.0; 4], "the points' next elastic strains")?;
+        try_resize(&mut next.dissipation, n, 0.0, "the points' next dissipation")?;
+        try_resize(&mut next.yielding, n, false, "the points' next yield flags")?;
         Ok(())
     }
 

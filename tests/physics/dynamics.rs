@@ -252,8 +252,7 @@ mass = "lumped"
             size = 3.0 * h,
             two_h = 2.0 * h,
         );
-        let scene = mpmlab::scene::Scene::parse(&text, "one-cell").unwrap();
-        let sim = Simulation::new(mpmlab::Model::build(&scene, &text, "one-cell").unwrap());
+        let sim = Simulation::from_scene_text(&text, "one-cell.toml").unwrap_or_else(|e| panic!("{e}"));
         let c = sim.conditioning().unwrap().cfl_lumped.unwrap();
         let exact = 0.5 * (rho / e).sqrt();
         println!("h = {h}, E = {e}, rho = {rho}: CFL {c:.15e}, exact {exact:.15e}");
