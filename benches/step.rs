@@ -79,28 +79,30 @@ fn bench(c: &mut Criterion) {
             .unwrap()
     };
     g.bench_function("assemble stiffness", |b| b.iter(assemble));
-    let (k, _) = assemble();
+    let (values, _) = assemble();
+    let k = pattern.matrix(&values);
     {
         use mpmlab::solver::{Factorisation, Symbolic, Symmetry};
-        let symbolic = Symbolic::new(&k, Symmetry::Symmetric).unwrap();
+        let symbolic = Symbolic::new(k, Symmetry::Symmetric).unwrap();
         g.bench_function("newton: cholesky (numeric, symbolic reused)", |b| {
-            b.iter(|| Factorisation::new(&symbolic, &k, u64::MAX).unwrap())
+            b.iter(|| Factorisation::new(&symbolic, k, u64::MAX).unwrap())
         });
         let whole = Pattern::new(&map.dofs, &blocks, Storage::Full).unwrap();
-        let (kf, _) = whole
+        let (full_values, _) = whole
             .assemble_with(&map.dofs, &blocks, |b, out| {
                 map.group_stiffness(&map.groups[b], &model.points, &d_of, out)
             })
             .unwrap();
-        let lu = Symbolic::new(&kf, Symmetry::General).unwrap();
+        let kf = whole.matrix(&full_values);
+        let lu = Symbolic::new(kf, Symmetry::General).unwrap();
         g.bench_function("newton: LU of the same matrix (numeric, symbolic reused)", |b| {
-            b.iter(|| Factorisation::new(&lu, &kf, u64::MAX).unwrap())
+            b.iter(|| Factorisation::new(&lu, kf, u64::MAX).unwrap())
         });
     }
     g.bench_function("cholesky (symbolic + numeric)", |b| {
-        b.iter(|| linalg::cholesky(&k).unwrap())
+        b.iter(|| linalg::cholesky(k).unwrap())
     });
-    let factor = linalg::cholesky(&k).unwrap();
+    let factor = linalg::cholesky(k).unwrap();
     let rhs = vec![1.0; map.dofs.n_free];
     g.bench_function("solve", |b| b.iter(|| linalg::solve(&factor, &rhs)));
     g.bench_function("whole step (condition off)", |b| {

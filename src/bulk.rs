@@ -129,7 +129,7 @@ pub(crate) fn evaluate_with(
                 None => {
                     let r = sim
                         .hencky(p)
-                        .respond(&increment_gradient(st, total), &be_matrix(pts.b_e[p]));
+                        .respond(&increment_gradient(st, total), &be_matrix(pts.b_e_at(p)));
                     for (n, _, g) in st.iter() {
                         for i in 0..2 {
                             add(n, i, (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * v0);
@@ -138,7 +138,7 @@ pub(crate) fn evaluate_with(
                     r
                 }
                 Some((c, df)) => {
-                    let r = sim.hencky(p).respond(&(df * c), &be_matrix(pts.b_e[p]));
+                    let r = sim.hencky(p).respond(&(df * c), &be_matrix(pts.b_e_at(p)));
                     // P = tau(dF_bar) dF^-T = c P_bar.
                     let pm = r.p * c;
                     for (n, _, g) in st.iter() {
@@ -167,7 +167,7 @@ pub(crate) fn evaluate_with(
             },
             Some((ops, d, da)) => {
                 let df = band_gradient(st, ops, d, da);
-                let r = sim.hencky(p).respond(&df, &be_matrix(pts.b_e[p]));
+                let r = sim.hencky(p).respond(&df, &be_matrix(pts.b_e_at(p)));
                 for (k, (n, _, _)) in st.iter().enumerate() {
                     for l in 0..2 {
                         let mut f = 0.0;
@@ -332,15 +332,14 @@ pub(crate) fn tangent(
     gamma: f64,
 ) -> Result<SparseColMat<usize, f64>, crate::linalg::FactorError> {
     let ng = map.groups.len();
-    Ok(pattern
-        .assemble_with(&map.dofs, blocks, |b, out| {
-            if b < ng {
-                group_tangent(sim, map, it, None, b, out)
-            } else {
-                faces[b - ng].stiffness(gamma, out)
-            }
-        })?
-        .0)
+    let (values, _) = pattern.assemble_with(&map.dofs, blocks, |b, out| {
+        if b < ng {
+            group_tangent(sim, map, it, None, b, out)
+        } else {
+            faces[b - ng].stiffness(gamma, out)
+        }
+    })?;
+    pattern.owned_matrix(values)
 }
 
 /// Assembly blocks: the point groups, then the ghost faces.

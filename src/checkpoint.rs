@@ -128,25 +128,8 @@ impl Simulation {
         }
         let s = &record.state;
         let n = s.points.len();
-        let consistent = [
-            s.points.x0.len(),
-            s.points.vol.len(),
-            s.points.vol0.len(),
-            s.points.mass.len(),
-            s.points.stress.len(),
-            s.points.strain.len(),
-            s.points.lp.len(),
-            s.points.body.len(),
-            s.points.def_grad.len(),
-            s.points.b_e.len(),
-            s.points.szz.len(),
-            s.points.dissipation.len(),
-            s.points.yielding.len(),
-            s.points.lp0.len(),
-            s.points.v.len(),
-        ]
-        .iter()
-        .all(|&l| l == n)
+        let tracked = crate::state::tracked(self.model.analysis.kind);
+        let consistent = s.points.fits(n, tracked)
             && n == self.state.points.len()
             && s.points.body.iter().all(|&b| b < self.model.bodies.len())
             && s.ibm_offsets.len() == self.model.ibm.len()
@@ -161,6 +144,7 @@ impl Simulation {
         }
         self.params = record.params;
         self.state = record.state;
+        self.state.points.keep(tracked);
         Ok(self.state.step)
     }
 }

@@ -34,7 +34,7 @@ use crate::assembly::{Dof, DofMap, Mapping, Pattern, Storage};
 use crate::bulk::blocks_of;
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
-use crate::linalg::{self, Condition, ConditionMethod, Factor};
+use crate::linalg::{self, Condition, ConditionMethod, Factor, SparseRef};
 use crate::report::{Cutback, Energy, StepFailure, StepReport, Timings};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
 use crate::state::{MassCache, Simulation};
@@ -107,7 +107,7 @@ impl MassSolver {
                 .flat_map(|part| {
                     part.components.iter().map(|dofs| {
                         let vc: Vec<f64> = dofs.iter().map(|&d| v[d]).collect();
-                        0.5 * dot(&vc, &linalg::sym_lower_mul(&part.matrix, &vc))
+                        0.5 * dot(&vc, &linalg::sym_lower_mul(part.matrix.as_ref(), &vc))
                     })
                 })
                 .sum(),
@@ -209,15 +209,14 @@ fn consistent_mass(
     gamma_m: f64,
 ) -> Result<SparseColMat<usize, f64>, linalg::FactorError> {
     let ng = map.groups.len();
-    Ok(pattern
-        .assemble_with(dofs, blocks, |b, out| {
-            if b < ng {
-                group_mass(map, b, points, out)
-            } else {
-                faces[b - ng].stiffness(gamma_m, out)
-            }
-        })?
-        .0)
+    let (values, _) = pattern.assemble_with(dofs, blocks, |b, out| {
+        if b < ng {
+            group_mass(map, b, points, out)
+        } else {
+            faces[b - ng].stiffness(gamma_m, out)
+        }
+    })?;
+    pattern.owned_matrix(values)
 }
 
 /// Pattern and symbolic Cholesky of each scalar part (values only give the
@@ -234,7 +233,7 @@ fn analyse_parts(
         .map(|(dofs, _)| {
             let pattern = Pattern::new(dofs, blocks, Storage::Lower)?;
             let m = consistent_mass(map, dofs, &pattern, blocks, faces, points, 1.0)?;
-            Ok((pattern, linalg::cholesky_symbolic(&m)?))
+            Ok((pattern, linalg::cholesky_symbolic(m.as_ref())?))
         })
         .collect()
 }
@@ -257,7 +256,7 @@ fn factorise_parts(
         .zip(analyses)
         .map(|((dofs, components), (pattern, symbolic))| {
             let matrix = consistent_mass(map, &dofs, pattern, blocks, faces, points, gamma_m)?;
-            let factor = linalg::cholesky_with(symbolic, &matrix, budget)?;
+            let factor = linalg::cholesky_with(symbolic, matrix.as_ref(), budget)?;
             Ok(ScalarMass {
                 factor,
                 matrix,
@@ -1023,7 +1022,7 @@ fn mass_name(kind: MassKind) -> &'static str {
 }
 
 /// Condition number of an SPD matrix, or `inf` when it cannot be factorised.
-fn spd_condition(m: &SparseColMat<usize, f64>, mode: ConditionMode, dense_limit: usize) -> (Condition, Option<Factor>) {
+fn spd_condition(m: SparseRef<'_>, mode: ConditionMode, dense_limit: usize) -> (Condition, Option<Factor>) {
     match linalg::cholesky(m) {
         Ok(f) => {
             let limit = match mode {
@@ -1058,7 +1057,7 @@ fn spd_condition(m: &SparseColMat<usize, f64>, mode: ConditionMode, dense_limit:
 /// start; stops when it settles to 1e-8 relative (at most 2000 iterations).
 /// `K` is stored in full, `M` applied through `m_mul` and `m_solve`.
 fn generalised_lambda_max(
-    k: &SparseColMat<usize, f64>,
+    k: SparseRef<'_>,
     m_mul: impl Fn(&[f64]) -> Vec<f64>,
     m_solve: impl Fn(&[f64]) -> Vec<f64>,
 ) -> f64 {
@@ -1124,8 +1123,8 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
     let points = PointsOnGrid::of(sim);
     let mc = consistent_mass(map, &map.dofs, &pattern, &blocks, faces, &points, 0.0)?;
     let ms = consistent_mass(map, &map.dofs, &pattern, &blocks, faces, &points, sim.params.gamma_m)?;
-    let (cond_c, fact_c) = spd_condition(&mc, mode, limit);
-    let (cond_s, fact_s) = spd_condition(&ms, mode, limit);
+    let (cond_c, fact_c) = spd_condition(mc.as_ref(), mode, limit);
+    let (cond_s, fact_s) = spd_condition(ms.as_ref(), mode, limit);
     let lumped = lumped_mass(map, masses);
     let (lo, hi) = lumped
         .iter()
@@ -1144,7 +1143,7 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
     let k = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, 0.0)?;
     let ks = crate::bulk::tangent(sim, map, &full, &blocks, faces, &it, sim.params.gamma_k)?;
     let h = sim.model.grid.h;
-    let with = |k: &SparseColMat<usize, f64>, m: &SparseColMat<usize, f64>, f: &Option<Factor>| match f {
+    let with = |k: SparseRef<'_>, m: SparseRef<'_>, f: &Option<Factor>| match f {
         Some(f) => cfl(
             h,
             generalised_lambda_max(k, |x| linalg::sym_lower_mul(m, x), |b| linalg::solve(f, b)),
@@ -1155,13 +1154,13 @@ fn conditioning_on(sim: &Simulation, map: &Mapping, faces: &[GhostFace]) -> Resu
         mass_consistent: cond_c,
         mass_stabilised: cond_s,
         mass_lumped: cond_l,
-        cfl_consistent: with(&k, &mc, &fact_c),
-        cfl_stabilised: with(&ks, &ms, &fact_s),
+        cfl_consistent: with(k.as_ref(), mc.as_ref(), &fact_c),
+        cfl_stabilised: with(ks.as_ref(), ms.as_ref(), &fact_s),
         cfl_lumped: if lo > 0.0 {
             cfl(
                 h,
                 generalised_lambda_max(
-                    &k,
+                    k.as_ref(),
                     |x| x.iter().zip(&lumped).map(|(x, d)| x * d).collect(),
                     |b| b.iter().zip(&lumped).map(|(b, d)| b / d).collect(),
                 ),
@@ -1188,8 +1187,8 @@ pub(crate) fn conditioning(sim: &Simulation) -> Result<Conditioning, linalg::Fac
     let it = crate::bulk::evaluate(sim, &map, &vec![[0.0; 2]; map.dofs.node_dof.len()])?;
     let (mode, limit) = (sim.params.condition, sim.params.dense_limit);
     let k = |gamma: f64| crate::bulk::tangent(sim, &map, &lower, &blocks, &faces, &it, gamma);
-    c.stiffness = Some(spd_condition(&k(0.0)?, mode, limit).0);
-    c.stiffness_stabilised = Some(spd_condition(&k(sim.params.gamma_k)?, mode, limit).0);
+    c.stiffness = Some(spd_condition(k(0.0)?.as_ref(), mode, limit).0);
+    c.stiffness_stabilised = Some(spd_condition(k(sim.params.gamma_k)?.as_ref(), mode, limit).0);
     Ok(c)
 }
 
@@ -1291,7 +1290,7 @@ mass = "stabilised"
             );
             let pattern = Pattern::new(&map.dofs, &blocks, Storage::Lower).unwrap();
             let m = consistent_mass(&map, &map.dofs, &pattern, &blocks, &faces, &points, gamma).unwrap();
-            let factor = linalg::cholesky(&m).unwrap();
+            let factor = linalg::cholesky(m.as_ref()).unwrap();
             let pts = &sim.state.points;
             let v = map_velocities(&map, &solver, &pts.mass, &pts.v);
             let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
@@ -1309,7 +1308,7 @@ mass = "stabilised"
                 assert!((a - b).abs() <= 1e-12 * scale, "roller {roller}: {a} vs {b}");
             }
             let e = solver.energy(&v);
-            let e_ref = 0.5 * dot(&reference, &linalg::sym_lower_mul(&m, &reference));
+            let e_ref = 0.5 * dot(&reference, &linalg::sym_lower_mul(m.as_ref(), &reference));
             assert!(
                 (e - e_ref).abs() <= 1e-12 * e_ref,
                 "roller {roller}: energy {e} vs {e_ref}"

@@ -17,7 +17,11 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
-use faer::sparse::SparseColMat;
+use faer::sparse::SparseColMatRef;
+
+/// A reduced matrix as every solver routine reads it: its values over a
+/// pattern it may share ([`crate::assembly::Pattern::matrix`]).
+pub type SparseRef<'a> = SparseColMatRef<'a, usize, f64>;
 use faer::{Conj, Mat, Par, Side};
 use std::sync::Arc;
 
@@ -197,18 +201,18 @@ pub fn factor_what(kind: &str, s: &SymbolicCholesky<usize>) -> String {
 }
 
 /// Sparse Cholesky factorisation of a symmetric matrix given by its lower triangle.
-pub fn cholesky(a: &SparseColMat<usize, f64>) -> Result<Factor, FactorError> {
+pub fn cholesky(a: SparseRef<'_>) -> Result<Factor, FactorError> {
     cholesky_with(&cholesky_symbolic(a)?, a, u64::MAX)
 }
 
 /// [`cholesky`] refused beyond a memory budget ([`check_memory`]).
-pub fn cholesky_within(a: &SparseColMat<usize, f64>, budget: u64) -> Result<Factor, FactorError> {
+pub fn cholesky_within(a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorError> {
     cholesky_with(&cholesky_symbolic(a)?, a, budget)
 }
 
 /// Symbolic Cholesky analysis (ordering, elimination tree) of a pattern, to
 /// reuse for every matrix of that pattern.
-pub fn cholesky_symbolic(a: &SparseColMat<usize, f64>) -> Result<CholeskySymbolic, FactorError> {
+pub fn cholesky_symbolic(a: SparseRef<'_>) -> Result<CholeskySymbolic, FactorError> {
     factorize_symbolic_cholesky(a.symbolic(), Side::Lower, Default::default(), Default::default())
         .map(Arc::new)
         .map_err(|e| match e {
@@ -239,7 +243,7 @@ pub fn workspace(req: faer::dyn_stack::StackReq) -> Result<MemBuffer, FactorErro
 /// `Ok(Err(pivot))` at the first non-positive pivot.
 pub fn numeric_llt(
     s: &SymbolicCholesky<usize>,
-    a: &SparseColMat<usize, f64>,
+    a: SparseRef<'_>,
     values: &mut [f64],
 ) -> Result<Result<(), usize>, FactorError> {
     let mut mem = workspace(s.factorize_numeric_llt_scratch::<f64>(par(), Default::default()))?;
@@ -261,11 +265,7 @@ pub fn numeric_llt(
 /// Numeric Cholesky with a symbolic analysis of the same pattern, refused
 /// when its estimate ([`cholesky_bytes`]) exceeds `budget`
 /// ([`check_memory`]); an allocation that fails is an error too.
-pub fn cholesky_with(
-    symbolic: &CholeskySymbolic,
-    a: &SparseColMat<usize, f64>,
-    budget: u64,
-) -> Result<Factor, FactorError> {
+pub fn cholesky_with(symbolic: &CholeskySymbolic, a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorError> {
     let s = symbolic;
     check_memory(|| factor_what("Cholesky", s), cholesky_bytes(s), budget)?;
     let mut values = factor_values(s, || factor_what("Cholesky", s))?;
@@ -284,7 +284,7 @@ pub fn solve(factor: &Factor, b: &[f64]) -> Vec<f64> {
 }
 
 /// `y = A x` for a symmetric matrix stored as its lower triangle.
-pub fn sym_lower_mul(a: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
+pub fn sym_lower_mul(a: SparseRef<'_>, x: &[f64]) -> Vec<f64> {
     let mut y = vec![0.0; x.len()];
     let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
     for c in 0..a.ncols() {
@@ -307,7 +307,7 @@ pub type LuFactor = Lu<usize, f64>;
 /// tree and postorder (`n` indices each) infallibly: twice the memory the
 /// analysis takes is reserved and released first, so that a process short
 /// of it gets an error here rather than an abort inside faer.
-pub fn lu_symbolic(a: &SparseColMat<usize, f64>) -> Result<SymbolicLu<usize>, FactorError> {
+pub fn lu_symbolic(a: SparseRef<'_>) -> Result<SymbolicLu<usize>, FactorError> {
     let (m, n, nnz) = (a.nrows(), a.ncols(), a.compute_nnz());
     let scratch = faer::sparse::linalg::colamd::order_scratch::<usize>(m, n, nnz).size_bytes();
     let probe = scratch
@@ -335,7 +335,7 @@ pub fn lu_symbolic(a: &SparseColMat<usize, f64>) -> Result<SymbolicLu<usize>, Fa
 /// `bytes` its estimate before pivoting), not an abort.
 pub fn lu(
     symbolic: &SymbolicLu<usize>,
-    a: &SparseColMat<usize, f64>,
+    a: SparseRef<'_>,
     what: impl FnOnce() -> String,
     bytes: u64,
 ) -> Result<LuFactor, FactorError> {
@@ -361,7 +361,7 @@ pub fn solve_lu(factor: &LuFactor, b: &[f64], transpose: bool) -> Vec<f64> {
 
 /// `|A|_1`, the largest column sum of `|a_ij|`, of a matrix with every
 /// entry stored or (`lower`) of a symmetric one given by its lower triangle.
-pub fn one_norm(a: &SparseColMat<usize, f64>, lower: bool) -> f64 {
+pub fn one_norm(a: SparseRef<'_>, lower: bool) -> f64 {
     let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
     let mut sums = vec![0.0; a.ncols()];
     for c in 0..a.ncols() {
@@ -512,7 +512,7 @@ pub fn warm_dense_kernels() {
 /// densely; `None` when they fail to converge or their memory (the dense
 /// matrix and faer's workspace, reserved fallibly) cannot be had: the
 /// callers then use Lanczos, which needs no dense matrix.
-pub fn dense_eigenvalues(a: &SparseColMat<usize, f64>) -> Option<Vec<f64>> {
+pub fn dense_eigenvalues(a: SparseRef<'_>) -> Option<Vec<f64>> {
     use faer::linalg::evd;
     let n = a.nrows();
     let mut data: Vec<f64> = Vec::new();
@@ -559,7 +559,7 @@ pub enum Eigen {
 /// Condition number of the SPD matrix `a` (lower triangle) with Cholesky
 /// factor `factor`: dense when `a` has at most `dense_limit` rows, Lanczos
 /// above.
-pub fn condition(a: &SparseColMat<usize, f64>, factor: &Factor, dense_limit: usize) -> Condition {
+pub fn condition(a: SparseRef<'_>, factor: &Factor, dense_limit: usize) -> Condition {
     let how = if a.nrows() <= dense_limit {
         Eigen::Dense
     } else {
@@ -571,12 +571,7 @@ pub fn condition(a: &SparseColMat<usize, f64>, factor: &Factor, dense_limit: usi
 /// Condition number of the SPD matrix `a` (lower triangle) with Cholesky
 /// factor `factor`, computed as `how` says; `None` when `keep_going`
 /// (asked between iterations) returns `false`.
-pub fn condition_by(
-    a: &SparseColMat<usize, f64>,
-    factor: &Factor,
-    how: Eigen,
-    keep_going: &dyn Fn() -> bool,
-) -> Option<Condition> {
+pub fn condition_by(a: SparseRef<'_>, factor: &Factor, how: Eigen, keep_going: &dyn Fn() -> bool) -> Option<Condition> {
     let n = a.nrows();
     if n == 0 {
         return Some(Condition {

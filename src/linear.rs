@@ -14,17 +14,17 @@
 //! Failures (singular system, residual above tolerance, non-finite values)
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
-use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::assembly::{Dof, Mapping, Pattern, Stencils, Storage};
 use crate::geometry::P2;
 use crate::ghost;
 use crate::ibm::{self, IbmReport, IbmStep};
+use crate::linalg::SparseRef;
 use crate::linalg::{self, Condition, Eigen};
 use crate::material::mul3;
 use crate::points::Points;
 use crate::report::{Energy, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
 use crate::state::{check_points, Forces, Simulation};
-use faer::sparse::SparseColMat;
 use std::time::Instant;
 
 /// One quasi-static small-strain load step: each phase is a function below.
@@ -38,14 +38,17 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     // 1. Map the points and collect the contributions (implicit boundaries'
     //    d^a, band and f_d; ghost faces); the pattern once.
     let ibm_now = sim.ibm_boundaries_now(step)?;
-    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1, &mut timings)?;
+    let mut setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1, &mut timings)?;
     // 2. Assemble K and the right-hand side.
     let t = Instant::now();
     let system = assemble(&setup)?;
     timings.assembly = t.elapsed().as_secs_f64();
-    // 3. Factorise (sparse Cholesky).
+    // 3. Factorise (sparse Cholesky). The factorisation holds the step's
+    //    peak memory: the stencils are freed while it runs and rebuilt,
+    //    the same numbers, when they are next read.
+    setup.map.stencils = Stencils::default();
     let t = Instant::now();
-    let factor = linalg::cholesky_within(&system.k, sim.model.max_memory).map_err(|e| e.at_step(step))?;
+    let factor = linalg::cholesky_within(setup.k(&system), sim.model.max_memory).map_err(|e| e.at_step(step))?;
     timings.factorisation = t.elapsed().as_secs_f64();
     // 4. Solve and check the residual.
     let t = Instant::now();
@@ -53,12 +56,16 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     timings.solve = t.elapsed().as_secs_f64();
     // 5. Condition numbers of the reduced stiffness.
     let t = Instant::now();
+    if !setup.faces.is_empty() && sim.params.condition != ConditionMode::Off {
+        setup.restore_stencils()?;
+    }
     let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor, &residuals)?;
     timings.condition = t.elapsed().as_secs_f64();
     // 6. Update the points; work and stored energy (the factor is no
     //    longer needed: free it before the fields the step writes are copied).
     drop(factor);
     let t = Instant::now();
+    setup.restore_stencils()?;
     let updated = update(&setup, &system, &du, &residuals)?;
     timings.update = t.elapsed().as_secs_f64();
     // 7. Commit and report.
@@ -216,13 +223,30 @@ impl<'a> Setup<'a> {
         })
     }
 
+    /// The points' stencils again after they were freed for the
+    /// factorisation (built as [`Mapping::build`] built them).
+    fn restore_stencils(&mut self) -> Result<(), StepFailure> {
+        let (sim, pts) = (self.sim, &self.sim.state.points);
+        if self.map.stencils.len() != pts.len() {
+            self.map.stencils =
+                Stencils::build(&sim.model.grid, pts, &sim.model.bodies).map_err(|e| e.at_step(self.step))?;
+        }
+        Ok(())
+    }
+
     fn blocks(&self) -> Vec<&[usize]> {
         linear_blocks(&self.map, &self.band, &self.faces)
     }
 
-    /// The reduced stiffness (lower triangle) and `K_fc du_c`, with or
-    /// without the ghost term.
-    fn stiffness(&self, with_ghost: bool) -> Result<(SparseColMat<usize, f64>, Vec<f64>), StepFailure> {
+    /// The reduced stiffness `K` of `system` (lower triangle), over the
+    /// step's pattern.
+    fn k<'s>(&'s self, system: &'s System) -> SparseRef<'s> {
+        self.pattern.matrix(&system.k)
+    }
+
+    /// The reduced stiffness' values (lower triangle, over the pattern) and
+    /// `K_fc du_c`, with or without the ghost term.
+    fn stiffness(&self, with_ghost: bool) -> Result<(Vec<f64>, Vec<f64>), StepFailure> {
         let (map, pts) = (&self.map, &self.sim.state.points);
         let d_of = |p: usize| self.sim.material_of(p).d_matrix();
         let (ng, nb) = (map.groups.len(), self.band.len());
@@ -256,7 +280,8 @@ impl<'a> Setup<'a> {
 
 /// The assembled system of a step.
 struct System {
-    k: SparseColMat<usize, f64>,
+    /// `K`'s values over the step's pattern ([`Setup::k`]).
+    k: Vec<f64>,
     /// Loads per unit load factor, internal forces (free and prescribed).
     forces: Forces,
     boundaries: Vec<crate::boundary::BoundaryReport>,
@@ -313,7 +338,7 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
 /// with the same factor, each recorded as a residual.
 fn solve(setup: &Setup, system: &System, factor: &linalg::Factor) -> Result<(Vec<f64>, Vec<f64>), StepFailure> {
     let (sim, step) = (setup.sim, setup.step);
-    let (k, rhs, residual_norm) = (&system.k, &system.rhs, system.residual_norm);
+    let (k, rhs, residual_norm) = (setup.k(system), &system.rhs, system.residual_norm);
     let rel_of = |v: &[f64]| {
         if residual_norm > 0.0 {
             norm(v) / residual_norm
@@ -370,7 +395,7 @@ fn conditioning(
 ) -> Result<(Option<Condition>, Option<Condition>), StepFailure> {
     let sim = setup.sim;
     let params = &sim.params;
-    let k = &system.k;
+    let k = setup.k(system);
     let how = |n: usize| match params.condition {
         ConditionMode::Auto if n <= params.dense_limit => Some(Eigen::Dense),
         ConditionMode::Auto => Some(Eigen::Estimate),
@@ -391,8 +416,9 @@ fn conditioning(
         return Ok((Some(c), None));
     }
     let (k0, _) = setup.stiffness(false)?;
-    let c0 = match linalg::cholesky_within(&k0, setup.sim.model.max_memory) {
-        Ok(f0) => linalg::condition_by(&k0, &f0, how, &keep_going).ok_or_else(cancelled)?,
+    let k0 = setup.pattern.matrix(&k0);
+    let c0 = match linalg::cholesky_within(k0, setup.sim.model.max_memory) {
+        Ok(f0) => linalg::condition_by(k0, &f0, how, &keep_going).ok_or_else(cancelled)?,
         Err(e @ linalg::FactorError::Memory { .. }) => return Err(e.at_step(setup.step)),
         Err(_) => Condition {
             value: f64::INFINITY,
@@ -625,7 +651,7 @@ fn nodal_increments(map: &Mapping, du: &[f64]) -> Vec<P2> {
 }
 
 /// `K du - rhs`.
-fn residual_of(k: &faer::sparse::SparseColMat<usize, f64>, du: &[f64], rhs: &[f64]) -> Vec<f64> {
+fn residual_of(k: SparseRef<'_>, du: &[f64], rhs: &[f64]) -> Vec<f64> {
     linalg::sym_lower_mul(k, du)
         .iter()
         .zip(rhs)

@@ -39,12 +39,11 @@ use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
 use crate::ibm::{self, BandBlock, GradOp, IbmBoundary, IbmStep};
 use crate::kinematics::{commit_point, increment_gradient};
-use crate::linalg::{self, Condition};
+use crate::linalg::{self, Condition, SparseRef};
 use crate::report::{Cutback, Energy, SolverReport, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
 use crate::solver::{Factorisation, Symbolic, Symmetry};
 use crate::state::Simulation;
-use faer::sparse::SparseColMat;
 use std::time::Instant;
 
 fn norm(v: &[f64]) -> f64 {
@@ -53,7 +52,7 @@ fn norm(v: &[f64]) -> f64 {
 
 /// 1-norm condition estimate of a tangent through its factorisation
 /// (Hager-Higham: a handful of solves on the factor already computed).
-fn condition_with(k: &SparseColMat<usize, f64>, symmetry: Symmetry, f: &mut Factorisation) -> Condition {
+fn condition_with(k: SparseRef<'_>, symmetry: Symmetry, f: &mut Factorisation) -> Condition {
     let norm = linalg::one_norm(k, symmetry == Symmetry::Symmetric);
     let failed = std::cell::Cell::new(false);
     let solve = |x: &[f64], f: &mut Factorisation| {
@@ -89,7 +88,7 @@ fn infinite_condition() -> Condition {
 
 /// The condition estimate of a tangent not factorised yet (the one without
 /// the ghost term).
-fn condition_of(k: &SparseColMat<usize, f64>, symmetry: Symmetry, budget: u64) -> Condition {
+fn condition_of(k: SparseRef<'_>, symmetry: Symmetry, budget: u64) -> Condition {
     match Symbolic::new(k, symmetry).and_then(|s| Factorisation::new(&s, k, budget)) {
         Ok(mut f) => condition_with(k, symmetry, &mut f),
         Err(_) => infinite_condition(),
@@ -473,9 +472,15 @@ impl<'a> Setup<'a> {
         Ok(())
     }
 
+    /// The matrix of a tangent's `values` over the step's pattern.
+    fn matrix<'v>(&'v self, values: &'v [f64]) -> SparseRef<'v> {
+        self.pattern.matrix(values)
+    }
+
     /// The tangent of the residual at `d` (its negative derivative), with
-    /// the ghost term scaled by `gamma`.
-    fn tangent(&self, res: &Residual, d: &[P2], gamma: f64) -> Result<SparseColMat<usize, f64>, StepFailure> {
+    /// the ghost term scaled by `gamma`: its values over the step's pattern
+    /// ([`Setup::matrix`]).
+    fn tangent(&self, res: &Residual, d: &[P2], gamma: f64) -> Result<Vec<f64>, StepFailure> {
         let (ng, nf) = (self.map.groups.len(), self.faces.len());
         let nb = self.band.as_ref().map_or(0, |b| b.blocks.len());
         let blocks = self.blocks();
@@ -704,7 +709,7 @@ struct Solved {
     iterations: usize,
     /// The last tangent and its factorisation (for the condition number,
     /// the factorisation used and the inertia).
-    last: Option<(SparseColMat<usize, f64>, Factorisation)>,
+    last: Option<(Vec<f64>, Factorisation)>,
 }
 
 /// Newton-Raphson on the step's residual: tangent, factorisation by
@@ -765,7 +770,7 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
         let t = Instant::now();
         let singular = |e: linalg::FactorError| e.at_step(step);
         if symbolic.is_none() {
-            symbolic = Some(Symbolic::new(&k, setup.symmetry).map_err(singular)?);
+            symbolic = Some(Symbolic::new(setup.matrix(&k), setup.symmetry).map_err(singular)?);
         }
         let Some(analysis) = symbolic.as_ref() else {
             return Err(StepFailure::Internal {
@@ -773,7 +778,8 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
                 message: "no symbolic analysis".into(),
             });
         };
-        let mut factor = Factorisation::new(analysis, &k, setup.sim.model.max_memory).map_err(singular)?;
+        let mut factor =
+            Factorisation::new(analysis, setup.matrix(&k), setup.sim.model.max_memory).map_err(singular)?;
         timings.factorisation += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let dd = factor.solve(&res.r).map_err(singular)?;
@@ -821,9 +827,9 @@ fn conditioning(setup: &Setup, solved: &mut Solved) -> Result<(Option<Condition>
         return Ok((None, None));
     }
     let with = match &mut solved.last {
-        Some((k, f)) => condition_with(k, setup.symmetry, f),
+        Some((k, f)) => condition_with(setup.matrix(k), setup.symmetry, f),
         None => condition_of(
-            &setup.tangent(&solved.res, &solved.d, setup.gamma)?,
+            setup.matrix(&setup.tangent(&solved.res, &solved.d, setup.gamma)?),
             setup.symmetry,
             setup.sim.model.max_memory,
         ),
@@ -832,7 +838,7 @@ fn conditioning(setup: &Setup, solved: &mut Solved) -> Result<(Option<Condition>
         None
     } else {
         Some(condition_of(
-            &setup.tangent(&solved.res, &solved.d, 0.0)?,
+            setup.matrix(&setup.tangent(&solved.res, &solved.d, 0.0)?),
             setup.symmetry,
             setup.sim.model.max_memory,
         ))
@@ -976,13 +982,14 @@ pub(crate) fn tangent_check(sim: &Simulation, amplitude: f64) -> Result<f64, Ste
         }
     }
     let res = setup.residual(&d)?;
-    let k = setup.tangent(&res, &d, setup.gamma)?;
+    let values = setup.tangent(&res, &d, setup.gamma)?;
+    let k = setup.matrix(&values);
     let (cp, ri, val) = (k.col_ptr(), k.row_idx(), k.val());
     let mut worst = 0.0f64;
     for _ in 0..4 {
         let v: Vec<f64> = (0..map.dofs.n_free).map(|_| rand.centred()).collect();
         let kv = match setup.symmetry {
-            Symmetry::Symmetric => linalg::sym_lower_mul(&k, &v),
+            Symmetry::Symmetric => linalg::sym_lower_mul(k, &v),
             Symmetry::General => {
                 let mut kv = vec![0.0; map.dofs.n_free];
                 for c in 0..k.ncols() {

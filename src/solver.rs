@@ -20,7 +20,7 @@
 //!   F-bar) is stored whole and factorised by sparse LU with partial
 //!   pivoting (symbolic analysis reused); its inertia is not available.
 
-use crate::linalg::{self, FactorError};
+use crate::linalg::{self, FactorError, SparseRef};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{LdltRef, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::linalg::solvers::SymbolicLu;
@@ -77,12 +77,12 @@ pub struct Estimate {
 impl Symbolic {
     /// Analyse the pattern of `a` (its lower triangle when `symmetry` is
     /// [`Symmetry::Symmetric`]).
-    pub fn new(a: &SparseColMat<usize, f64>, symmetry: Symmetry) -> Result<Symbolic, FactorError> {
+    pub fn new(a: SparseRef<'_>, symmetry: Symmetry) -> Result<Symbolic, FactorError> {
         match symmetry {
             Symmetry::Symmetric => linalg::cholesky_symbolic(a).map(Symbolic::Cholesky),
             Symmetry::General => {
                 let lu = linalg::lu_symbolic(a)?;
-                let chol = linalg::cholesky_symbolic(&lower_of_sum(a)?)?;
+                let chol = linalg::cholesky_symbolic(lower_of_sum(a)?.as_ref())?;
                 Ok(Symbolic::Lu(lu, lu_estimate(&chol, a.compute_nnz())))
             }
         }
@@ -119,7 +119,7 @@ fn lu_estimate(chol: &SymbolicCholesky<usize>, nnz: usize) -> Estimate {
 }
 
 /// The lower triangle of the pattern of `A + A^T` (values 1).
-fn lower_of_sum(a: &SparseColMat<usize, f64>) -> Result<SparseColMat<usize, f64>, FactorError> {
+fn lower_of_sum(a: SparseRef<'_>) -> Result<SparseColMat<usize, f64>, FactorError> {
     let (cp, ri) = (a.col_ptr(), a.row_idx());
     let mut t = Vec::new();
     t.try_reserve_exact(ri.len())
@@ -130,6 +130,16 @@ fn lower_of_sum(a: &SparseColMat<usize, f64>) -> Result<SparseColMat<usize, f64>
         }
     }
     SparseColMat::try_new_from_triplets(a.nrows(), a.ncols(), &t).map_err(|e| FactorError::Other(format!("{e:?}")))
+}
+
+/// A copy of `a` with its own pattern, reserved fallibly.
+fn owned(a: SparseRef<'_>) -> Result<SparseColMat<usize, f64>, FactorError> {
+    let fail = || FactorError::allocation("a copy of the matrix", 16 * a.compute_nnz());
+    let symbolic = a.symbolic().to_owned().map_err(|_| fail())?;
+    let mut values = Vec::new();
+    values.try_reserve_exact(a.val().len()).map_err(|_| fail())?;
+    values.extend_from_slice(a.val());
+    Ok(SparseColMat::new(symbolic, values))
 }
 
 /// A factorised reduced tangent.
@@ -155,13 +165,13 @@ fn par() -> Par {
 
 /// LU of the symmetric `a` (lower triangle) made whole, within `budget`;
 /// `s` is the Cholesky analysis of its pattern.
-fn whole_lu(s: &SymbolicCholesky<usize>, a: &SparseColMat<usize, f64>, budget: u64) -> Result<Factor, FactorError> {
+fn whole_lu(s: &SymbolicCholesky<usize>, a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorError> {
     let e = lu_estimate(s, 2 * a.compute_nnz());
     linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
     let whole = symmetrised(a)?;
     Ok(Factor::Lu(linalg::lu(
-        &linalg::lu_symbolic(&whole)?,
-        &whole,
+        &linalg::lu_symbolic(whole.as_ref())?,
+        whole.as_ref(),
         || e.what.clone(),
         e.bytes,
     )?))
@@ -175,7 +185,7 @@ impl Factorisation {
     /// process beyond `budget` bytes is refused before it is computed
     /// ([`linalg::check_memory`]), and one whose memory cannot be allocated
     /// is an error, not an abort.
-    pub fn new(symbolic: &Symbolic, a: &SparseColMat<usize, f64>, budget: u64) -> Result<Factorisation, FactorError> {
+    pub fn new(symbolic: &Symbolic, a: SparseRef<'_>, budget: u64) -> Result<Factorisation, FactorError> {
         let e = symbolic.estimate();
         linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
         let s = match symbolic {
@@ -214,7 +224,7 @@ impl Factorisation {
             let d = pivots(s, &values);
             return Ok(Factorisation {
                 negative_pivots: Some(d.iter().filter(|&&x| x < 0.0).count()),
-                kind: Factor::Ldlt(s.clone(), values, a.clone()),
+                kind: Factor::Ldlt(s.clone(), values, owned(a)?),
                 budget,
             });
         }
@@ -246,11 +256,11 @@ impl Factorisation {
     pub fn solve(&mut self, b: &[f64]) -> Result<Vec<f64>, FactorError> {
         let x = self.solve_once(b);
         if let Factor::Ldlt(s, _, a) = &self.kind {
-            let r = linalg::sym_lower_mul(a, &x);
+            let r = linalg::sym_lower_mul(a.as_ref(), &x);
             let num: f64 = r.iter().zip(b).map(|(r, b)| (r - b) * (r - b)).sum::<f64>().sqrt();
             let den: f64 = b.iter().map(|b| b * b).sum::<f64>().sqrt();
             if !(num <= 1e-8 * den.max(f64::MIN_POSITIVE)) {
-                let lu = whole_lu(s, a, self.budget)?;
+                let lu = whole_lu(s, a.as_ref(), self.budget)?;
                 self.kind = lu;
                 return Ok(self.solve_once(b));
             }
@@ -308,7 +318,7 @@ fn pivots(s: &SymbolicCholesky<usize>, values: &[f64]) -> Vec<f64> {
 }
 
 /// The whole matrix of a symmetric one given by its lower triangle.
-fn symmetrised(a: &SparseColMat<usize, f64>) -> Result<SparseColMat<usize, f64>, FactorError> {
+fn symmetrised(a: SparseRef<'_>) -> Result<SparseColMat<usize, f64>, FactorError> {
     let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
     let mut t = Vec::new();
     t.try_reserve_exact(2 * v.len())

@@ -8,9 +8,9 @@ use crate::boundary::{self, bspline::BSpline, BoundaryReport};
 use crate::geometry::P2;
 use crate::ghost;
 use crate::model::Model;
-use crate::points::Points;
+use crate::points::{Points, Tracked};
 pub use crate::report::{Energy, Progress, ProgressHook, StepFailure, StepReport, Timings};
-use crate::scene::ConditionMode;
+use crate::scene::{AnalysisKind, ConditionMode};
 
 /// Settings that may change between steps.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -84,6 +84,28 @@ pub struct Simulation {
     cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
+/// The per-point arrays an analysis reads and writes beyond those every
+/// analysis does.
+pub(crate) fn tracked(kind: AnalysisKind) -> Tracked {
+    match kind {
+        AnalysisKind::QuasiStaticLinear => Tracked {
+            strain: true,
+            finite: false,
+            velocity: false,
+        },
+        AnalysisKind::QuasiStaticFinite => Tracked {
+            strain: false,
+            finite: true,
+            velocity: false,
+        },
+        AnalysisKind::ExplicitDynamics => Tracked {
+            strain: false,
+            finite: true,
+            velocity: true,
+        },
+    }
+}
+
 impl Simulation {
     /// The simulation of `model` at its start; the model's points move
     /// into the state (one copy of the points, not two).
@@ -99,7 +121,7 @@ impl Simulation {
             gamma_m: model.gamma_m(),
         };
         let mut points = std::mem::take(&mut model.points);
-        points.shrink_to_fit();
+        points.keep(tracked(model.analysis.kind));
         let active_cells = crate::assembly::active_cells(&model.grid, &points, &model.bodies);
         let initial_energy = points.kinetic_energy();
         let state = State {

@@ -298,7 +298,12 @@ pub fn points_vtk(sim: &Simulation) -> Option<Vtk> {
             [u[0], u[1], 0.0]
         })
         .collect();
-    let velocity: Vec<f64> = pts.v.iter().flat_map(|v| [v[0], v[1], 0.0]).collect();
+    let velocity: Vec<f64> = (0..n)
+        .flat_map(|p| {
+            let v = pts.velocity(p);
+            [v[0], v[1], 0.0]
+        })
+        .collect();
     let stress: Vec<f64> = (0..n)
         .flat_map(|p| {
             let s = pts.stress[p];
@@ -337,7 +342,7 @@ pub fn points_vtk(sim: &Simulation) -> Option<Vtk> {
     data.push(Attribute::tensors("stress").with_data(stress));
     let body: Vec<i32> = pts.body.iter().map(|&b| b as i32).collect();
     data.push(Attribute::generic("body", 1).with_data(body));
-    let yielding: Vec<u8> = pts.yielding.iter().map(|&y| u8::from(y)).collect();
+    let yielding: Vec<u8> = (0..n).map(|p| u8::from(pts.yielding_at(p))).collect();
     data.push(Attribute::generic("yielding", 1).with_data(yielding));
     Some(vtk(DataSet::inline(UnstructuredGridPiece {
         points: IOBuffer::new(xyz),

@@ -22,11 +22,14 @@ impl Field {
                 Field::PlasticStrain => {
                     let m = sim.model().bodies[pts.body[p]].material;
                     match sim.model().materials[m].yield_stress {
-                        Some(y) if pts.vol0[p] > 0.0 => pts.dissipation[p] / (pts.vol0[p] * y),
+                        Some(y) if pts.vol0[p] > 0.0 => pts.dissipation_at(p) / (pts.vol0[p] * y),
                         _ => 0.0,
                     }
                 }
-                Field::Speed => pts.v[p][0].hypot(pts.v[p][1]),
+                Field::Speed => {
+                    let v = pts.velocity(p);
+                    v[0].hypot(v[1])
+                }
                 Field::Error => 0.0,
             })
             .collect()

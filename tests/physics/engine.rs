@@ -247,8 +247,8 @@ fn symmetric_indefinite_factor_counts_negative_eigenvalues() {
     // away from eigenvalues (none within 1e-3 of sigma here).
     for (m, sigma) in [(3, 0.0), (3, 2.5), (6, 1.5), (40, 0.37), (40, 2.01), (60, 5.3)] {
         let (a, negative) = shifted_laplacian(m, sigma);
-        let symbolic = Symbolic::new(&a, Symmetry::Symmetric).unwrap();
-        let mut f = Factorisation::new(&symbolic, &a, u64::MAX).unwrap();
+        let symbolic = Symbolic::new(a.as_ref(), Symmetry::Symmetric).unwrap();
+        let mut f = Factorisation::new(&symbolic, a.as_ref(), u64::MAX).unwrap();
         let expect = if negative == 0 {
             FactorKind::Cholesky
         } else {
@@ -259,7 +259,7 @@ fn symmetric_indefinite_factor_counts_negative_eigenvalues() {
         // The solve is accurate: x = A^-1 (A x0) recovers x0 to the
         // condition number (at most ~1e3 for these shifts) times eps.
         let x0: Vec<f64> = (0..m * m).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
-        let b = mpmlab::linalg::sym_lower_mul(&a, &x0);
+        let b = mpmlab::linalg::sym_lower_mul(a.as_ref(), &x0);
         let x = f.solve(&b).unwrap();
         let err = x.iter().zip(&x0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-9, "m = {m}, sigma = {sigma}: {err:e}");
