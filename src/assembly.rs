@@ -10,7 +10,7 @@
 
 use crate::basis::{factor_len, key_of, weights_1d, write_factors, BasisKind, StencilKey, StencilView};
 use crate::grid::Grid;
-use crate::linalg::{FactorError, SparseRef};
+use crate::linalg::{FactorError, Ix, SparseRef};
 use crate::model::{Body, GridDirichlet, GridTarget};
 use crate::points::Points;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -146,7 +146,7 @@ pub struct Group {
 /// sums of overlapping blocks are formed in the same order as before).
 pub struct Pattern {
     pub n: usize,
-    symbolic: SymbolicSparseColMat<usize>,
+    symbolic: SymbolicSparseColMat<Ix>,
     storage: Storage,
 }
 
@@ -442,12 +442,22 @@ impl Pattern {
                 }
             }
         }
-        let mut col_ptr: Vec<usize> = Vec::new();
+        // 32-bit indices ([`Ix`]): the unknowns here, the entries below.
+        let too_many = |what: &str, count: usize| {
+            FactorError::Other(format!(
+                "the matrix pattern has {count} {what}, more than the {} its indices can number",
+                Ix::MAX
+            ))
+        };
+        if Ix::try_from(n).is_err() {
+            return Err(too_many("unknowns", n));
+        }
+        let mut col_ptr: Vec<Ix> = Vec::new();
         col_ptr
             .try_reserve_exact(n + 1)
-            .map_err(|_| FactorError::allocation("the column pointers of the matrix pattern", 8 * (n + 1)))?;
-        col_ptr.push(0usize);
-        let mut row_idx: Vec<usize> = Vec::new();
+            .map_err(|_| FactorError::allocation("the column pointers of the matrix pattern", 4 * (n + 1)))?;
+        col_ptr.push(0);
+        let mut row_idx: Vec<Ix> = Vec::new();
         let mut rows = Vec::new();
         let mut neighbours: Vec<u32> = Vec::new();
         for (col, &nd) in col_of.iter().enumerate() {
@@ -460,7 +470,7 @@ impl Pattern {
                 for d in dofs.node_dof[b as usize] {
                     if let Dof::Free(r) = d {
                         if storage == Storage::Full || r >= col {
-                            rows.push(r);
+                            rows.push(r as Ix);
                         }
                     }
                 }
@@ -469,11 +479,11 @@ impl Pattern {
             row_idx.try_reserve(rows.len()).map_err(|_| {
                 FactorError::allocation(
                     "the row indices of the matrix pattern",
-                    8 * (row_idx.len() + rows.len()),
+                    4 * (row_idx.len() + rows.len()),
                 )
             })?;
             row_idx.extend_from_slice(&rows);
-            col_ptr.push(row_idx.len());
+            col_ptr.push(Ix::try_from(row_idx.len()).map_err(|_| too_many("entries", row_idx.len()))?);
         }
         // faer checks the invariants: sorted, in-range rows.
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
@@ -495,7 +505,7 @@ impl Pattern {
 
     /// The matrix of `values` over a copy of this pattern, for a matrix
     /// kept beyond its pattern; reserved fallibly.
-    pub fn owned_matrix(&self, values: Vec<f64>) -> Result<SparseColMat<usize, f64>, FactorError> {
+    pub fn owned_matrix(&self, values: Vec<f64>) -> Result<SparseColMat<Ix, f64>, FactorError> {
         let col_ptr = try_copy(self.symbolic.col_ptr(), "the column pointers of the sparse matrix")?;
         let row_idx = try_copy(self.symbolic.row_idx(), "the row indices of the sparse matrix")?;
         let symbolic = SymbolicSparseColMat::new_checked(self.n, self.n, col_ptr, None, row_idx);
@@ -516,7 +526,7 @@ impl Pattern {
     ) -> Result<(Vec<f64>, Vec<f64>), FactorError> {
         let mut values = try_filled(self.nnz(), 0.0, "the values of the sparse matrix")?;
         let mut coupling = try_filled(self.n, 0.0, "the coupling to prescribed values")?;
-        let (cp, ri) = (self.symbolic.col_ptr(), self.symbolic.row_idx());
+        let ri = self.symbolic.row_idx();
         let mut kb = Vec::new();
         let mut bd = Vec::new();
         for (b, nodes) in blocks.iter().enumerate() {
@@ -527,12 +537,15 @@ impl Pattern {
             for (c, dc) in bd.iter().enumerate() {
                 match *dc {
                     Dof::Free(col) => {
-                        let column = &ri[cp[col]..cp[col + 1]];
+                        let range = self.symbolic.col_range(col);
+                        let column = &ri[range.clone()];
                         for (r, dr) in bd.iter().enumerate() {
                             if let Dof::Free(row) = *dr {
                                 if self.storage == Storage::Full || row >= col {
-                                    let k = column.binary_search(&row).expect("the pattern holds every block entry");
-                                    values[cp[col] + k] += kb[r * m2 + c];
+                                    let k = column
+                                        .binary_search(&(row as Ix))
+                                        .expect("the pattern holds every block entry");
+                                    values[range.start + k] += kb[r * m2 + c];
                                 }
                             }
                         }

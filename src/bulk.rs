@@ -330,7 +330,7 @@ pub(crate) fn tangent(
     faces: &[GhostFace],
     it: &Iterate,
     gamma: f64,
-) -> Result<SparseColMat<usize, f64>, crate::linalg::FactorError> {
+) -> Result<SparseColMat<crate::linalg::Ix, f64>, crate::linalg::FactorError> {
     let ng = map.groups.len();
     let (values, _) = pattern.assemble_with(&map.dofs, blocks, |b, out| {
         if b < ng {

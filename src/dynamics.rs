@@ -34,7 +34,7 @@ use crate::assembly::{Dof, DofMap, Mapping, Pattern, Storage};
 use crate::bulk::blocks_of;
 use crate::geometry::P2;
 use crate::ghost::{self, GhostFace};
-use crate::linalg::{self, Condition, ConditionMethod, Factor, SparseRef};
+use crate::linalg::{self, Condition, ConditionMethod, Factor, Ix, SparseRef};
 use crate::report::{Cutback, Energy, StepFailure, StepReport, Timings};
 use crate::scene::{ConditionMode, MassKind, StressUpdate, VelocityUpdate};
 use crate::state::{MassCache, Simulation};
@@ -64,7 +64,7 @@ struct ScalarMass {
     /// `L L^T` of `M_s` on this part's nodes.
     factor: Factor,
     /// `M_s` (lower triangle), for the kinetic energy.
-    matrix: SparseColMat<usize, f64>,
+    matrix: SparseColMat<Ix, f64>,
     /// Per component solved with this part, the free dof of the 2D system
     /// of each scalar unknown (length `M_s.nrows()` each).
     components: Vec<Vec<usize>>,
@@ -207,7 +207,7 @@ fn consistent_mass(
     faces: &[GhostFace],
     points: &PointsOnGrid,
     gamma_m: f64,
-) -> Result<SparseColMat<usize, f64>, linalg::FactorError> {
+) -> Result<SparseColMat<Ix, f64>, linalg::FactorError> {
     let ng = map.groups.len();
     let (values, _) = pattern.assemble_with(dofs, blocks, |b, out| {
         if b < ng {
@@ -1064,10 +1064,10 @@ fn generalised_lambda_max(
     let n = k.nrows();
     let k_mul = |x: &[f64]| {
         let mut y = vec![0.0; n];
-        let (cp, ri, v) = (k.col_ptr(), k.row_idx(), k.val());
+        let (ri, v) = (k.row_idx(), k.val());
         for c in 0..n {
-            for i in cp[c]..cp[c + 1] {
-                y[ri[i]] += v[i] * x[c];
+            for i in k.symbolic().col_range(c) {
+                y[ri[i] as usize] += v[i] * x[c];
             }
         }
         y

@@ -20,7 +20,7 @@
 //!   F-bar) is stored whole and factorised by sparse LU with partial
 //!   pivoting (symbolic analysis reused); its inertia is not available.
 
-use crate::linalg::{self, FactorError, SparseRef};
+use crate::linalg::{self, FactorError, Ix, SparseRef};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{LdltRef, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::linalg::solvers::SymbolicLu;
@@ -61,10 +61,10 @@ pub enum Symmetry {
 /// The symbolic analysis of one pattern, reused for every matrix of it.
 #[derive(Clone)]
 pub enum Symbolic {
-    Cholesky(Arc<SymbolicCholesky<usize>>),
+    Cholesky(Arc<SymbolicCholesky<Ix>>),
     /// The LU analysis and an estimate of its factor (partial pivoting
     /// decides the fill only numerically).
-    Lu(SymbolicLu<usize>, Estimate),
+    Lu(SymbolicLu<Ix>, Estimate),
 }
 
 /// What a factor will take, known before it is computed.
@@ -106,7 +106,7 @@ impl Symbolic {
 /// entry), and faer copies the matrix (`nnz` entries). Row pivoting adds
 /// fill this does not count; the tangents here are diagonally dominant
 /// enough that it stays small.
-fn lu_estimate(chol: &SymbolicCholesky<usize>, nnz: usize) -> Estimate {
+fn lu_estimate(chol: &SymbolicCholesky<Ix>, nnz: usize) -> Estimate {
     let entries = 2 * chol.len_val();
     Estimate {
         what: format!(
@@ -119,21 +119,22 @@ fn lu_estimate(chol: &SymbolicCholesky<usize>, nnz: usize) -> Estimate {
 }
 
 /// The lower triangle of the pattern of `A + A^T` (values 1).
-fn lower_of_sum(a: SparseRef<'_>) -> Result<SparseColMat<usize, f64>, FactorError> {
-    let (cp, ri) = (a.col_ptr(), a.row_idx());
+fn lower_of_sum(a: SparseRef<'_>) -> Result<SparseColMat<Ix, f64>, FactorError> {
+    let ri = a.row_idx();
     let mut t = Vec::new();
     t.try_reserve_exact(ri.len())
-        .map_err(|_| FactorError::allocation("the pattern of A + A^T", 24 * ri.len()))?;
+        .map_err(|_| FactorError::allocation("the pattern of A + A^T", 16 * ri.len()))?;
     for c in 0..a.ncols() {
-        for &r in &ri[cp[c]..cp[c + 1]] {
-            t.push(Triplet::new(r.max(c), r.min(c), 1.0));
+        let col = c as Ix;
+        for &r in &ri[a.symbolic().col_range(c)] {
+            t.push(Triplet::new(r.max(col), r.min(col), 1.0));
         }
     }
     SparseColMat::try_new_from_triplets(a.nrows(), a.ncols(), &t).map_err(|e| FactorError::Other(format!("{e:?}")))
 }
 
 /// A copy of `a` with its own pattern, reserved fallibly.
-fn owned(a: SparseRef<'_>) -> Result<SparseColMat<usize, f64>, FactorError> {
+fn owned(a: SparseRef<'_>) -> Result<SparseColMat<Ix, f64>, FactorError> {
     let fail = || FactorError::allocation("a copy of the matrix", 16 * a.compute_nnz());
     let symbolic = a.symbolic().to_owned().map_err(|_| fail())?;
     let mut values = Vec::new();
@@ -152,10 +153,10 @@ pub struct Factorisation {
 }
 
 enum Factor {
-    Cholesky(Arc<SymbolicCholesky<usize>>, Vec<f64>),
+    Cholesky(Arc<SymbolicCholesky<Ix>>, Vec<f64>),
     /// The factor, and the matrix (lower triangle) for the backward-error
     /// check of each solve.
-    Ldlt(Arc<SymbolicCholesky<usize>>, Vec<f64>, SparseColMat<usize, f64>),
+    Ldlt(Arc<SymbolicCholesky<Ix>>, Vec<f64>, SparseColMat<Ix, f64>),
     Lu(linalg::LuFactor),
 }
 
@@ -165,7 +166,7 @@ fn par() -> Par {
 
 /// LU of the symmetric `a` (lower triangle) made whole, within `budget`;
 /// `s` is the Cholesky analysis of its pattern.
-fn whole_lu(s: &SymbolicCholesky<usize>, a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorError> {
+fn whole_lu(s: &SymbolicCholesky<Ix>, a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorError> {
     let e = lu_estimate(s, 2 * a.compute_nnz());
     linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
     let whole = symmetrised(a)?;
@@ -297,11 +298,11 @@ impl Factorisation {
 }
 
 /// The pivots `D` of an `L D L^T` factor, in the factor's (permuted) order.
-fn pivots(s: &SymbolicCholesky<usize>, values: &[f64]) -> Vec<f64> {
+fn pivots(s: &SymbolicCholesky<Ix>, values: &[f64]) -> Vec<f64> {
     match s.raw() {
         SymbolicCholeskyRaw::Simplicial(sym) => {
             let cp = sym.col_ptr();
-            (0..sym.nrows()).map(|k| values[cp[k]]).collect()
+            (0..sym.nrows()).map(|k| values[cp[k] as usize]).collect()
         }
         SymbolicCholeskyRaw::Supernodal(sym) => {
             let f = faer::sparse::linalg::cholesky::supernodal::SupernodalLdltRef::new(sym, values);
@@ -318,16 +319,17 @@ fn pivots(s: &SymbolicCholesky<usize>, values: &[f64]) -> Vec<f64> {
 }
 
 /// The whole matrix of a symmetric one given by its lower triangle.
-fn symmetrised(a: SparseRef<'_>) -> Result<SparseColMat<usize, f64>, FactorError> {
-    let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
+fn symmetrised(a: SparseRef<'_>) -> Result<SparseColMat<Ix, f64>, FactorError> {
+    let (ri, v) = (a.row_idx(), a.val());
     let mut t = Vec::new();
     t.try_reserve_exact(2 * v.len())
         .map_err(|_| FactorError::allocation("the whole matrix for LU", 48 * v.len()))?;
     for c in 0..a.ncols() {
-        for k in cp[c]..cp[c + 1] {
-            t.push(faer::sparse::Triplet::new(ri[k], c, v[k]));
-            if ri[k] != c {
-                t.push(faer::sparse::Triplet::new(c, ri[k], v[k]));
+        let col = c as Ix;
+        for k in a.symbolic().col_range(c) {
+            t.push(faer::sparse::Triplet::new(ri[k], col, v[k]));
+            if ri[k] != col {
+                t.push(faer::sparse::Triplet::new(col, ri[k], v[k]));
             }
         }
     }

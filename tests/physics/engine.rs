@@ -214,9 +214,9 @@ fn a_panic_inside_a_step_is_a_failure_value_and_the_state_survives() {
 /// The 2D five-point Laplacian on an `m x m` grid shifted by `sigma`,
 /// lower triangle: eigenvalues `4 - 2 cos(i pi/(m+1)) - 2 cos(j pi/(m+1)) -
 /// sigma`, `i, j = 1..m`.
-fn shifted_laplacian(m: usize, sigma: f64) -> (faer::sparse::SparseColMat<usize, f64>, usize) {
+fn shifted_laplacian(m: usize, sigma: f64) -> (faer::sparse::SparseColMat<mpmlab::linalg::Ix, f64>, usize) {
     use faer::sparse::{SparseColMat, Triplet};
-    let id = |i: usize, j: usize| i * m + j;
+    let id = |i: usize, j: usize| (i * m + j) as mpmlab::linalg::Ix;
     let mut t = Vec::new();
     for i in 0..m {
         for j in 0..m {
