@@ -14,7 +14,7 @@
 //! Failures (singular system, residual above tolerance, non-finite values)
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
-use crate::assembly::{Dof, Mapping, Pattern, Stencils, Storage};
+use crate::assembly::{Dof, Mapping, Pattern, Storage};
 use crate::geometry::P2;
 use crate::ghost;
 use crate::ibm::{self, IbmReport, IbmStep};
@@ -44,9 +44,9 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let system = assemble(&setup)?;
     timings.assembly = t.elapsed().as_secs_f64();
     // 3. Factorise (sparse Cholesky). The factorisation holds the step's
-    //    peak memory: the stencils are freed while it runs and rebuilt,
-    //    the same numbers, when they are next read.
-    setup.map.stencils = Stencils::default();
+    //    peak memory: the stencils and point groups are freed while it
+    //    runs and rebuilt, the same numbers, when they are next read.
+    setup.map.release();
     let t = Instant::now();
     let factor = linalg::cholesky_within(setup.k(&system), sim.model.max_memory).map_err(|e| e.at_step(step))?;
     timings.factorisation = t.elapsed().as_secs_f64();
@@ -57,7 +57,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     // 5. Condition numbers of the reduced stiffness.
     let t = Instant::now();
     if !setup.faces.is_empty() && sim.params.condition != ConditionMode::Off {
-        setup.restore_stencils()?;
+        setup.restore_mapping()?;
     }
     let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor, &residuals)?;
     timings.condition = t.elapsed().as_secs_f64();
@@ -65,7 +65,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     //    longer needed: free it before the fields the step writes are copied).
     drop(factor);
     let t = Instant::now();
-    setup.restore_stencils()?;
+    setup.restore_mapping()?;
     let updated = update(&setup, &system, &du, &residuals)?;
     timings.update = t.elapsed().as_secs_f64();
     // 7. Commit and report.
@@ -223,15 +223,13 @@ impl<'a> Setup<'a> {
         })
     }
 
-    /// The points' stencils again after they were freed for the
-    /// factorisation (built as [`Mapping::build`] built them).
-    fn restore_stencils(&mut self) -> Result<(), StepFailure> {
-        let (sim, pts) = (self.sim, &self.sim.state.points);
-        if self.map.stencils.len() != pts.len() {
-            self.map.stencils =
-                Stencils::build(&sim.model.grid, pts, &sim.model.bodies).map_err(|e| e.at_step(self.step))?;
-        }
-        Ok(())
+    /// The mapping's stencils and point groups again after they were
+    /// freed for the factorisation ([`Mapping::restore`]).
+    fn restore_mapping(&mut self) -> Result<(), StepFailure> {
+        let sim = self.sim;
+        self.map
+            .restore(&sim.model.grid, &sim.state.points, &sim.model.bodies)
+            .map_err(|e| e.at_step(self.step))
     }
 
     fn blocks(&self) -> Vec<&[usize]> {
