@@ -260,6 +260,55 @@ mass = "lumped"
     }
 }
 
+#[test]
+fn lumped_mass_condition_is_the_largest_over_the_smallest_nodal_weight() {
+    // One point at local coordinates (xi, eta) = (3/4, 1/2) of its cell
+    // (lattice placement, h = 1): the lumped mass puts m N_i on the cell's
+    // four nodes, N = (1 - xi)(1 - eta), xi (1 - eta), ... = 1/8, 3/8, 1/8,
+    // 3/8, so cond(M_L) = 3 exactly (every factor is exact in binary).
+    // With the point at the centre every node gets m/4: cond(M_L) = 1.
+    for (x0, want) in [(1.5, 3.0), (1.25, 1.0)] {
+        let text = format!(
+            r#"[scene]
+name = "one-point"
+description = "One cell, one point."
+[grid]
+origin = [0.0, 0.0]
+size = [3.0, 3.0]
+h = 1.0
+[[material]]
+name = "m"
+E = 1.0e3
+nu = 0.0
+density = 2.0
+[[body]]
+name = "b"
+material = "m"
+points_per_cell = 1
+placement = "lattice"
+lattice = [1, 1]
+region = {{ shape = "rectangle", min = [{x0}, 1.25], max = [{x1}, 1.75] }}
+[analysis]
+kind = "explicit-dynamics"
+duration = 0.001
+load_steps = 1
+mass = "lumped"
+"#,
+            x1 = x0 + 0.5,
+        );
+        let sim = Simulation::from_scene_text(&text, "one-point.toml").unwrap_or_else(|e| panic!("{e}"));
+        let c = sim.conditioning().unwrap().mass_lumped;
+        assert_eq!(
+            (c.value, c.lambda_max / c.lambda_min),
+            (want, want),
+            "point at x = {}",
+            x0 + 0.25
+        );
+        // The largest lumped mass is m N_max, m = rho V = 2 x 0.25.
+        assert_eq!(c.lambda_max, 0.5 * if want == 3.0 { 0.375 } else { 0.25 });
+    }
+}
+
 fn mean_energy_error(reports: &[mpmlab::StepReport]) -> f64 {
     let w0 = reports[0].dynamics.as_ref().unwrap().initial_energy;
     reports
