@@ -518,7 +518,7 @@ impl Pattern {
     /// The matrix of `values` (one per stored entry, as
     /// [`Pattern::assemble_with`] returns them) over this pattern: the
     /// pattern is shared, not copied (at 10^5 unknowns its indices are
-    /// 8 MB).
+    /// 4 MB).
     pub fn matrix<'a>(&'a self, values: &'a [f64]) -> SparseRef<'a> {
         SparseRef::new(self.symbolic.as_ref(), values)
     }

@@ -323,7 +323,7 @@ fn symmetrised(a: SparseRef<'_>) -> Result<SparseColMat<Ix, f64>, FactorError> {
     let (ri, v) = (a.row_idx(), a.val());
     let mut t = Vec::new();
     t.try_reserve_exact(2 * v.len())
-        .map_err(|_| FactorError::allocation("the whole matrix for LU", 48 * v.len()))?;
+        .map_err(|_| FactorError::allocation("the whole matrix for LU", 32 * v.len()))?;
     for c in 0..a.ncols() {
         let col = c as Ix;
         for k in a.symbolic().col_range(c) {
