@@ -213,22 +213,14 @@ fn translating_domain_mass_conditioning() {
     }
 }
 
-/// `(1/(nt W0)) sum_i |W_kin,i + W_eps,i - W0|` (G 5.2).
-#[test]
-fn cfl_number_of_one_cell_is_half_the_inverse_wave_speed() {
-    // One cell of side h with one point at its centre (volume V, mass
-    // rho V), nu = 0: the gradients there are (+-1, +-1)/(2h), so
-    // B B^T = diag(1, 1, 2)/h^2 and, with D = E diag(1, 1, 1/2),
-    // lambda_max(K) = E V/h^2 (threefold). The lumped mass puts rho V/4 on
-    // each node, so lambda_max(K, M_L) = 4E/(rho h^2) and G 3.5's CFL
-    // number C = 1/(h sqrt(lambda_max)) = sqrt(rho/E)/2 = 1/(2c), whatever
-    // h. The three eigenvalues are equal, so the power iteration has
-    // nothing to separate: the reported number is exact to round-off.
-    for (h, e, rho) in [(1.0f64, 4.0f64, 1.0f64), (0.5, 4.0, 1.0), (0.25, 1.0e3, 2.5)] {
-        let text = format!(
-            r#"[scene]
+/// An explicit-dynamics scene on a 3 x 3 grid of cell size `h` (one
+/// material: `E`, nu = 0, density `rho`; lumped mass) with one body whose
+/// placement and region are `body`'s lines.
+fn one_cell(h: f64, e: f64, rho: f64, body: &str) -> Simulation {
+    let text = format!(
+        r#"[scene]
 name = "one-cell"
-description = "One cell, one point at its centre."
+description = "One cell of a 3 x 3 grid, its points."
 [grid]
 origin = [0.0, 0.0]
 size = [{size}, {size}]
@@ -241,18 +233,39 @@ density = {rho}
 [[body]]
 name = "b"
 material = "m"
-points_per_cell = 1
-region = {{ shape = "rectangle", min = [{h}, {h}], max = [{two_h}, {two_h}] }}
+{body}
 [analysis]
 kind = "explicit-dynamics"
 duration = 0.001
 load_steps = 1
 mass = "lumped"
 "#,
-            size = 3.0 * h,
-            two_h = 2.0 * h,
+        size = 3.0 * h,
+    );
+    Simulation::from_scene_text(&text, "one-cell.toml").unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn cfl_number_of_one_cell_is_half_the_inverse_wave_speed() {
+    // One cell of side h with one point at its centre (volume V, mass
+    // rho V), nu = 0: the gradients there are (+-1, +-1)/(2h), so
+    // B B^T = diag(1, 1, 2)/h^2 and, with D = E diag(1, 1, 1/2),
+    // lambda_max(K) = E V/h^2 (threefold). The lumped mass puts rho V/4 on
+    // each node, so lambda_max(K, M_L) = 4E/(rho h^2) and G 3.5's CFL
+    // number C = 1/(h sqrt(lambda_max)) = sqrt(rho/E)/2 = 1/(2c), whatever
+    // h. The three eigenvalues are equal, so the power iteration has
+    // nothing to separate: the reported number is exact to round-off.
+    for (h, e, rho) in [(1.0f64, 4.0f64, 1.0f64), (0.5, 4.0, 1.0), (0.25, 1.0e3, 2.5)] {
+        let sim = one_cell(
+            h,
+            e,
+            rho,
+            &format!(
+                r#"points_per_cell = 1
+region = {{ shape = "rectangle", min = [{h}, {h}], max = [{two_h}, {two_h}] }}"#,
+                two_h = 2.0 * h
+            ),
         );
-        let sim = Simulation::from_scene_text(&text, "one-cell.toml").unwrap_or_else(|e| panic!("{e}"));
         let c = sim.conditioning().unwrap().cfl_lumped.unwrap();
         let exact = 0.5 * (rho / e).sqrt();
         println!("h = {h}, E = {e}, rho = {rho}: CFL {c:.15e}, exact {exact:.15e}");
@@ -268,35 +281,14 @@ fn lumped_mass_condition_is_the_largest_over_the_smallest_nodal_weight() {
     // 3/8, so cond(M_L) = 3 exactly (every factor is exact in binary).
     // With the point at the centre every node gets m/4: cond(M_L) = 1.
     for (x0, want) in [(1.5, 3.0), (1.25, 1.0)] {
-        let text = format!(
-            r#"[scene]
-name = "one-point"
-description = "One cell, one point."
-[grid]
-origin = [0.0, 0.0]
-size = [3.0, 3.0]
-h = 1.0
-[[material]]
-name = "m"
-E = 1.0e3
-nu = 0.0
-density = 2.0
-[[body]]
-name = "b"
-material = "m"
-points_per_cell = 1
+        let body = format!(
+            r#"points_per_cell = 1
 placement = "lattice"
 lattice = [1, 1]
-region = {{ shape = "rectangle", min = [{x0}, 1.25], max = [{x1}, 1.75] }}
-[analysis]
-kind = "explicit-dynamics"
-duration = 0.001
-load_steps = 1
-mass = "lumped"
-"#,
-            x1 = x0 + 0.5,
+region = {{ shape = "rectangle", min = [{x0}, 1.25], max = [{x1}, 1.75] }}"#,
+            x1 = x0 + 0.5
         );
-        let sim = Simulation::from_scene_text(&text, "one-point.toml").unwrap_or_else(|e| panic!("{e}"));
+        let sim = one_cell(1.0, 1.0e3, 2.0, &body);
         let c = sim.conditioning().unwrap().mass_lumped;
         assert_eq!(
             (c.value, c.lambda_max / c.lambda_min),
@@ -337,6 +329,7 @@ fn explicit_ghost_faces_on_populated_cells_are_the_mappings() {
     }
 }
 
+/// `(1/(nt W0)) sum_i |W_kin,i + W_eps,i - W0|` (G 5.2).
 fn mean_energy_error(reports: &[mpmlab::StepReport]) -> f64 {
     let w0 = reports[0].dynamics.as_ref().unwrap().initial_energy;
     reports
