@@ -189,8 +189,11 @@ pub(crate) fn evaluate_with(
 }
 
 /// `dF = I + sum_k sum_l d_kl G_k[l] + grad(S d^a)` of a point inside a
-/// band ([`GradOp`]).
-pub(crate) fn band_gradient(st: crate::basis::StencilView, ops: &[GradOp], d: &[P2], da: &[P2]) -> Matrix2<f64> {
+/// band ([`GradOp`]): the gradient of its motion
+/// [`IbmStep::point_increment`](crate::ibm::IbmStep::point_increment)
+/// `x -> x + D S d + S d^a`, for the nodal unknowns `d` and prescribed
+/// increments `d^a` (m, indexed by grid node) of the stencil `st`.
+pub fn band_gradient(st: crate::basis::StencilView, ops: &[GradOp], d: &[P2], da: &[P2]) -> Matrix2<f64> {
     let ga = st.gradient(|n| da[n]);
     let mut df = Matrix2::new(1.0 + ga[0][0], ga[0][1], ga[1][0], 1.0 + ga[1][1]);
     for (k, (n, _, _)) in st.iter().enumerate() {

@@ -8,6 +8,8 @@
 //! - C (16): the Dirichlet function `d(phi)` and its derivative; the band's
 //!   own integral (C (18)-(21)) at delta/h = 0.1, 0.25, 0.5 and the stiffness
 //!   of a one-cell 1D problem solved by the engine, against closed forms;
+//!   under finite deformation, a band point's deformation gradient against
+//!   central differences of its motion `D S d + S d^a`;
 //! - B (13)-(17): B-spline traction weights on a straight and a circular
 //!   boundary against exact line integrals;
 //! - the Hencky / von Mises return map against closed-form pure shear and
@@ -802,6 +804,123 @@ fn band_integral_is_c18_for_any_width() {
 // ---------------------------------------------------------------------------
 // B-spline traction (B 3.4)
 // ---------------------------------------------------------------------------
+
+#[test]
+fn band_deformation_gradient_is_the_derivative_of_the_motion() {
+    // Under finite deformation a point in a band moves by
+    // u(x) = D(x) S(x) d + S(x) d^a (C section 3's displacement with the
+    // prescribed field, `IbmStep::point_increment`), so its increment's
+    // deformation gradient
+    // must be dF = I + grad u: the band's operators G_k[l] carry D's own
+    // gradient, and grad(S d^a) the prescribed field's. Checked here by
+    // central differences of the motion, with nodal increments d and d^a
+    // that have both components everywhere, at points across a fixed and a
+    // roller boundary inclined at 30 degrees and at a corner of two, for
+    // the standard basis and GIMP, at delta/h = 0.25 and 0.5 (where D is
+    // far from 1).
+    use mpmlab::basis::{stencil, BasisKind};
+    use mpmlab::bulk::band_gradient;
+    use mpmlab::ibm::{in_band, IbmBoundary, IbmStep};
+    use mpmlab::scene::DirichletKind;
+    let h = 0.5;
+    let grid = Grid {
+        origin: [-2.0, -2.0],
+        h,
+        nx: 8,
+        ny: 8,
+    };
+    let th = 30f64.to_radians();
+    let t = [th.cos(), th.sin()];
+    let line = |kind, a: [f64; 2], b: [f64; 2]| IbmBoundary {
+        name: "b".into(),
+        kind,
+        points: vec![a, b],
+        side: 1.0,
+        value: [0.0, 0.0],
+        gauss_points: 2,
+        exact_field: false,
+        fit_regularisation: None,
+        moves: false,
+        spline: None,
+    };
+    let inclined = |kind| line(kind, [-1.9 * t[0], -1.9 * t[1]], [1.9 * t[0], 1.9 * t[1]]);
+    // A second boundary at right angles to the first, through the origin.
+    let crossing = |kind| line(kind, [1.9 * t[1], -1.9 * t[0]], [-1.9 * t[1], 1.9 * t[0]]);
+    // Increments of a few per cent of h, different at every node.
+    let nodes = grid.num_nodes();
+    let d: Vec<[f64; 2]> = (0..nodes)
+        .map(|n| {
+            let n = n as f64;
+            [0.03 * h * (1.3 * n + 0.2).sin(), 0.02 * h * (0.7 * n).cos()]
+        })
+        .collect();
+    let da: Vec<[f64; 2]> = (0..nodes)
+        .map(|n| {
+            let n = n as f64;
+            [0.04 * h * (1.1 * n).cos(), -0.025 * h * (0.9 * n + 1.0).sin()]
+        })
+        .collect();
+    // Points at distance phi delta from the inclined line, s along it.
+    let inward = |phi: f64, s: f64| [s * t[0] - phi * t[1], s * t[1] + phi * t[0]];
+    let eps = 1e-6 * h;
+    let mut checked = 0;
+    for r in [0.25, 0.5] {
+        let delta = r * h;
+        for set in [
+            vec![inclined(DirichletKind::Fixed)],
+            vec![inclined(DirichletKind::Roller)],
+            vec![inclined(DirichletKind::Fixed), crossing(DirichletKind::Roller)],
+        ] {
+            let step = IbmStep {
+                bs: &set,
+                delta,
+                da: da.clone(),
+                in_band: vec![],
+                fit_regularisation: 0.0,
+            };
+            for (phi, s) in [(0.2, 0.37), (0.55, 0.41), (0.8, 0.93), (0.35, 1.27)] {
+                let x = inward(phi * delta, s);
+                assert!(in_band(&set, x, delta), "{x:?} lies in a band");
+                for (kind, lp) in [(BasisKind::Standard, [0.0; 2]), (BasisKind::Gimp, [0.2 * h; 2])] {
+                    let at = |x: [f64; 2]| stencil(&grid, kind, x, lp);
+                    let owned = at(x);
+                    let st = owned.view();
+                    let ops = step.gradient_ops(st, x).expect("a point in a band has band operators");
+                    let df = band_gradient(st, &ops, &d, &da);
+                    for j in 0..2 {
+                        let mut xp = x;
+                        let mut xm = x;
+                        xp[j] += eps;
+                        xm[j] -= eps;
+                        let (sp, sm) = (at(xp), at(xm));
+                        // Both sides see the same nodes (no grid line
+                        // within eps of the points chosen).
+                        assert_eq!(sp.view().key(), sm.view().key(), "{x:?}");
+                        let up = step.point_increment(sp.view(), xp, &d);
+                        let um = step.point_increment(sm.view(), xm, &d);
+                        for i in 0..2 {
+                            let fd = if i == j { 1.0 } else { 0.0 } + (up[i] - um[i]) / (2.0 * eps);
+                            // Central differences: truncation eps^2 |u'''|
+                            // with u''' of order |d| / delta^3 (D is
+                            // quadratic in phi): about 1e-12 here; round-off
+                            // 1e-16 |u| / eps, about 1e-11. The increments'
+                            // gradients are of order 0.1, so 1e-8 separates
+                            // any wrong term.
+                            assert!(
+                                (df[(i, j)] - fd).abs() < 1e-8,
+                                "{kind:?} delta/h {r}, {} boundaries, at {x:?}: dF[{i}][{j}] = {} vs {fd}",
+                                set.len(),
+                                df[(i, j)]
+                            );
+                        }
+                    }
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(checked, 2 * 3 * 4 * 2);
+}
 
 /// `int N_v(x(t)) dt` over `t in [a, b]` for a smooth path inside one cell
 /// sub-interval, composite Simpson with `n` (even) panels.
