@@ -419,6 +419,16 @@ fn step_dt(sim: &Simulation) -> f64 {
     sim.model.analysis.duration.unwrap_or(0.0) / sim.load_steps() as f64
 }
 
+/// The explicit step's energy guard: the limit `factor (W0 + |W| + D)`
+/// (initial energy, the loads' work, plastic dissipation; J per unit
+/// thickness) when kinetic plus strain energy `ku` exceeds it, `None`
+/// otherwise or when nothing has entered the system yet. A balanced run
+/// has `ku = W0 + W - D`, below the limit for any `factor >= 1`.
+fn energy_limit_exceeded(ku: f64, w0: f64, work: f64, dissipation: f64, factor: f64) -> Option<f64> {
+    let scale = w0 + work.abs() + dissipation;
+    (scale > 0.0 && ku > factor * scale).then_some(factor * scale)
+}
+
 /// Failures a smaller time step may avoid, which [`cut_back`] retries:
 ///
 /// - [`StepFailure::Diverged`]: each of its guards measures what the time
@@ -867,15 +877,14 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
     let external_work = sim.state.external_work + work;
     let w0 = sim.state.initial_energy;
     let energy_error = kinetic + strain + dissipation - external_work - w0;
-    let scale = w0 + external_work.abs() + dissipation;
-    if scale > 0.0 && kinetic + strain > blowup_factor * scale {
+    if let Some(limit) = energy_limit_exceeded(kinetic + strain, w0, external_work, dissipation, blowup_factor) {
         return Err(StepFailure::Diverged {
             step,
             reason: format!(
                 "kinetic + strain energy {:.3e} J exceeds {} x (initial energy + work + dissipation) = {:.3e} J with the {} mass",
                 kinetic + strain,
                 blowup_factor,
-                blowup_factor * scale,
+                limit,
                 mass_name(kind)
             ),
         });
@@ -1228,6 +1237,18 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The energy guard counts dissipation on the side of what entered:
+    /// a plastic run that has dissipated `D` may hold `ku` up to
+    /// `factor (W0 + |W| + D)`. With W0 = 2, W = -1 (the loads took 1 J
+    /// out), D = 1 and factor 10 the limit is 40 J: 39 passes, 41 does not.
+    /// A run with nothing in it (W0 = W = D = 0) is never stopped.
+    #[test]
+    fn energy_guard_limit_is_factor_times_initial_energy_work_and_dissipation() {
+        assert_eq!(energy_limit_exceeded(39.0, 2.0, -1.0, 1.0, 10.0), None);
+        assert_eq!(energy_limit_exceeded(41.0, 2.0, -1.0, 1.0, 10.0), Some(40.0));
+        assert_eq!(energy_limit_exceeded(1.0, 0.0, 0.0, 0.0, 10.0), None);
+    }
 
     /// A block moving with a velocity gradient in a 2 m grid, optionally on
     /// a roller at y = 0.5 (the grid line under its points).

@@ -1026,3 +1026,74 @@ impl IbmStep<'_> {
         (reports, work)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `grid_weight` is `int N_n ds` over the grid lines from `n` to the
+    /// neighbours held in the same component, inside the material: each
+    /// whole edge gives `int_0^h (1 - s/h) ds = h/2`. A 4 x 4 grid of unit
+    /// cells, the material above a fixed boundary at y = 0.5, `u_x` held on
+    /// the columns x = 0 and x = 4 (the grid's edges) and `u_y` on the rows
+    /// y = 0 and y = 4. The Gauss points of a whole edge weigh `(1 - t)`
+    /// exactly (degree 1), so the weights are h/2 per edge to round-off.
+    #[test]
+    fn grid_weight_is_the_held_grid_lines_inside_the_material() {
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            h: 1.0,
+            nx: 4,
+            ny: 4,
+        };
+        let base = IbmBoundary {
+            name: "base".into(),
+            kind: DirichletKind::Fixed,
+            points: vec![[-1.0, 0.5], [5.0, 0.5]],
+            side: 1.0,
+            value: [0.0, 0.0],
+            gauss_points: 2,
+            exact_field: false,
+            fit_regularisation: None,
+            moves: false,
+            spline: None,
+        };
+        let bs = [base];
+        let step = IbmStep {
+            bs: &bs,
+            delta: 1e-6,
+            da: vec![[0.0; 2]; grid.num_nodes()],
+            in_band: vec![],
+            fit_regularisation: 0.0,
+        };
+        let free = |n: usize, c: usize| {
+            let (i, j) = grid.node_ij(n);
+            match c {
+                0 => i != 0 && i != grid.nx,
+                _ => j != 0 && j != grid.ny,
+            }
+        };
+        let h = grid.h;
+        for (i, j, c, want) in [
+            // On a held column: the edges up and down it.
+            (0, 2, 0, h),
+            (4, 2, 0, h),
+            // Beside one: the edge across to it.
+            (1, 2, 0, 0.5 * h),
+            (3, 2, 0, 0.5 * h),
+            // On the held top row: the edges along it.
+            (2, 4, 1, h),
+            // Where a held column meets the held top row, each component
+            // has one edge.
+            (0, 4, 0, 0.5 * h),
+            (0, 4, 1, 0.5 * h),
+            // The bottom row lies outside the material.
+            (2, 0, 1, 0.0),
+            // Away from the held lines, nothing.
+            (2, 2, 0, 0.0),
+        ] {
+            let w = step.grid_weight(&grid, &free, grid.node(i, j), c);
+            assert!((w - want).abs() < 1e-15, "node ({i}, {j}) component {c}: {w} vs {want}");
+        }
+    }
+}
