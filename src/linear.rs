@@ -71,7 +71,13 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let map = &setup.map;
     let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
     let faces = setup.faces.clone();
-    let nodal = nodal_increments(map, &du);
+    let mut nodal = nodal_increments(map, &du);
+    if let Some(s) = &setup.ibm {
+        for (u, a) in nodal.iter_mut().zip(&s.da) {
+            u[0] += a[0];
+            u[1] += a[1];
+        }
+    }
     let ghost_force = ghost::force(&faces, sim.params.gamma_k, &nodal);
     let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &nodal);
     drop(setup);
@@ -203,6 +209,15 @@ impl<'a> Setup<'a> {
         } else {
             Vec::new()
         };
+        // The ghost penalty acts on the nodes' whole motion d + d^a (a
+        // linear field leaves its normal derivative without jumps; d alone
+        // has them where d^a ends): J_G d^a joins f_d.
+        if let Some(s) = &ibm_step {
+            for (n, f) in ghost::force(&faces, sim.params.gamma_k, &s.da).iter().enumerate() {
+                f_d[n][0] += f[0];
+                f_d[n][1] += f[1];
+            }
+        }
         timings.mapping = start.elapsed().as_secs_f64();
         let t = Instant::now();
         let pattern = Pattern::new(&map.dofs, &linear_blocks(&map, &band, &faces), Storage::Lower)

@@ -14,7 +14,8 @@
 //!      `I + sum G d + grad(S d^a)`, [`crate::ibm::GradOp`]), the material's
 //!      `P = tau dF^-T` and `A = dP/d dF` ([`crate::material::hencky`]),
 //!      `f_int = sum_p P : G V0_p`, `K = sum_p V0 G : A : G`;
-//!    - ghost faces: `f_G = gamma_K J_G d`, `K_G = gamma_K J_G` (G (27));
+//!    - ghost faces: `f_G = gamma_K J_G (d + d^a)`, `K_G = gamma_K J_G`
+//!      (G (27), on the nodes' whole motion);
 //!    - implicit boundaries: the band's `K_band d + f_d` with its blocks
 //!      `int B_bar^T C B_bar - B^T C B` (C (18)-(27), on the increment);
 //!    - loads: body forces and point loads at `lambda`, tractions on the
@@ -388,7 +389,10 @@ impl<'a> Setup<'a> {
                 }
             }
         }
-        // Ghost force f_G = gamma J_G d on the free rows.
+        // Ghost force f_G = gamma J_G (d + d^a) on the free rows: the
+        // penalty acts on the nodes' whole motion, whose normal derivative
+        // a linear field leaves without jumps (the unknowns d alone have
+        // them where d^a ends).
         let mut fg = vec![0.0; map.dofs.n_free];
         for f in &self.faces {
             for row in 0..6 {
@@ -396,7 +400,10 @@ impl<'a> Setup<'a> {
                     let Dof::Free(i) = map.dofs.node_dof[f.nodes[row]][c] else {
                         continue;
                     };
-                    fg[i] += self.gamma * (0..6).map(|k| f.j[row][k] * d[f.nodes[k]][c]).sum::<f64>();
+                    fg[i] += self.gamma
+                        * (0..6)
+                            .map(|k| f.j[row][k] * (d[f.nodes[k]][c] + self.da(f.nodes[k])[c]))
+                            .sum::<f64>();
                 }
             }
         }
@@ -642,8 +649,14 @@ fn increment(
     timings.update = t.elapsed().as_secs_f64();
     // 5. Commit and report.
     let (faces, boundaries) = (setup.faces.clone(), setup.boundaries.clone());
-    let ghost_force = ghost::force(&faces, setup.gamma, &solved.d);
-    let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &solved.d);
+    let motion: Vec<P2> = (0..solved.d.len())
+        .map(|n| {
+            let a = setup.da(n);
+            [solved.d[n][0] + a[0], solved.d[n][1] + a[1]]
+        })
+        .collect();
+    let ghost_force = ghost::force(&faces, setup.gamma, &motion);
+    let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &motion);
     let map = &setup.map;
     let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
     drop(setup);
