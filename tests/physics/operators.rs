@@ -31,6 +31,29 @@ fn sim(text: &str) -> Simulation {
     Simulation::from_scene_text(text, "operators.toml").unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// An implicit boundary through `points` with the material on its
+/// `side` (1: left of the direction of travel), no prescribed value and no
+/// exact field.
+fn polyline(
+    name: &str,
+    kind: mpmlab::scene::DirichletKind,
+    points: Vec<[f64; 2]>,
+    side: f64,
+) -> mpmlab::ibm::IbmBoundary {
+    mpmlab::ibm::IbmBoundary {
+        name: name.into(),
+        kind,
+        points,
+        side,
+        value: [0.0, 0.0],
+        gauss_points: 2,
+        exact_field: false,
+        fit_regularisation: None,
+        moves: false,
+        spline: None,
+    }
+}
+
 // ---------------------------------------------------------------------------
 // Ghost stabilisation (G 3.2-3.4)
 // ---------------------------------------------------------------------------
@@ -435,23 +458,12 @@ fn dirichlet_matrix_of_fixed_and_roller_boundaries_is_c_section_3() {
     // to its lower right), at points inside both bands, inside one, beyond
     // them and outside the material; beyond a polyline's ends a boundary
     // does not act (D = I).
-    use mpmlab::ibm::{d_total, in_band, IbmBoundary};
+    use mpmlab::ibm::{d_total, in_band};
     use mpmlab::scene::DirichletKind;
     let delta = 0.5;
     let th = 60f64.to_radians();
     let t2 = [th.cos(), th.sin()];
-    let line = |kind, a: [f64; 2], b: [f64; 2], side: f64| IbmBoundary {
-        name: "b".into(),
-        kind,
-        points: vec![a, b],
-        side,
-        value: [0.0, 0.0],
-        gauss_points: 2,
-        exact_field: false,
-        fit_regularisation: None,
-        moves: false,
-        spline: None,
-    };
+    let line = |kind, a: [f64; 2], b: [f64; 2], side: f64| polyline("b", kind, vec![a, b], side);
     // Inward normals: (0, 1) for the base; (sin 60, -cos 60) for the
     // inclined line travelled from -3 t2 to 3 t2 with the material on its
     // right (side -1).
@@ -554,7 +566,6 @@ fn band_quadrature_integrates_the_strip_along_an_inclined_boundary() {
     // int s = L^2 delta / 2, int phi = L delta^2 / 2, int phi^2 = L delta^3 / 3,
     // int s phi = L^2 delta^2 / 4, for a polyline of two inclined segments
     // crossing several cells, with the material on either side.
-    use mpmlab::ibm::IbmBoundary;
     use mpmlab::scene::DirichletKind;
     let grid = Grid {
         origin: [-0.5, 0.25],
@@ -571,18 +582,7 @@ fn band_quadrature_integrates_the_strip_along_an_inclined_boundary() {
     let m = [a[0] + 0.37 * len * t[0], a[1] + 0.37 * len * t[1]];
     for side in [1.0, -1.0] {
         let n = [-side * t[1], side * t[0]];
-        let boundary = IbmBoundary {
-            name: "b".into(),
-            kind: DirichletKind::Fixed,
-            points: vec![a, m, b],
-            side,
-            value: [0.0, 0.0],
-            gauss_points: 2,
-            exact_field: false,
-            fit_regularisation: None,
-            moves: false,
-            spline: None,
-        };
+        let boundary = polyline("b", DirichletKind::Fixed, vec![a, m, b], side);
         for delta in [0.1, 0.02] {
             let pts = boundary.band_points(&grid, delta);
             // 2 Gauss points along each piece, 3 across; the line crosses
@@ -734,7 +734,7 @@ fn band_integral_is_c18_for_any_width() {
     // r = delta/h, symmetric mode u_y = d_0 below, d_1 above, u_x = 0):
     //   E [[4/(3r) - 5/3 + 17r/15, 5/6 - 17r/15], [., 17r/15]].
     // Here delta/h = 0.5 is open to the test (no point is involved).
-    use mpmlab::ibm::{b_bar, d_total, grid_stencil, IbmBoundary};
+    use mpmlab::ibm::{b_bar, d_total, grid_stencil};
     use mpmlab::scene::DirichletKind;
     let (h, e) = (2.0, 1.0e6);
     let grid = Grid {
@@ -743,18 +743,7 @@ fn band_integral_is_c18_for_any_width() {
         nx: 1,
         ny: 1,
     };
-    let base = IbmBoundary {
-        name: "base".into(),
-        kind: DirichletKind::Fixed,
-        points: vec![[0.0, 0.0], [h, 0.0]],
-        side: 1.0,
-        value: [0.0, 0.0],
-        gauss_points: 2,
-        exact_field: false,
-        fit_regularisation: None,
-        moves: false,
-        spline: None,
-    };
+    let base = polyline("base", DirichletKind::Fixed, vec![[0.0, 0.0], [h, 0.0]], 1.0);
     // Plane strain, nu = 0: C = diag(E, E, E/2); only e_yy enters here.
     for r in [0.1, 0.25, 0.5] {
         let delta = r * h;
@@ -820,7 +809,7 @@ fn band_deformation_gradient_is_the_derivative_of_the_motion() {
     // far from 1).
     use mpmlab::basis::{stencil, BasisKind};
     use mpmlab::bulk::band_gradient;
-    use mpmlab::ibm::{in_band, IbmBoundary, IbmStep};
+    use mpmlab::ibm::{in_band, IbmStep};
     use mpmlab::scene::DirichletKind;
     let h = 0.5;
     let grid = Grid {
@@ -831,18 +820,7 @@ fn band_deformation_gradient_is_the_derivative_of_the_motion() {
     };
     let th = 30f64.to_radians();
     let t = [th.cos(), th.sin()];
-    let line = |kind, a: [f64; 2], b: [f64; 2]| IbmBoundary {
-        name: "b".into(),
-        kind,
-        points: vec![a, b],
-        side: 1.0,
-        value: [0.0, 0.0],
-        gauss_points: 2,
-        exact_field: false,
-        fit_regularisation: None,
-        moves: false,
-        spline: None,
-    };
+    let line = |kind, a: [f64; 2], b: [f64; 2]| polyline("b", kind, vec![a, b], 1.0);
     let inclined = |kind| line(kind, [-1.9 * t[0], -1.9 * t[1]], [1.9 * t[0], 1.9 * t[1]]);
     // A second boundary at right angles to the first, through the origin.
     let crossing = |kind| line(kind, [1.9 * t[1], -1.9 * t[0]], [-1.9 * t[1], 1.9 * t[0]]);
@@ -1217,7 +1195,6 @@ fn roller_constraint_weights_are_exact_line_integrals() {
     // written out here). Along a straight piece inside a cell N_n is
     // quadratic, so the engine's 3 Gauss points per piece are exact; the
     // midpoint rule's error is below 1e-8 of the weights here.
-    use mpmlab::ibm::IbmBoundary;
     use mpmlab::scene::DirichletKind;
     let grid = Grid {
         origin: [-0.5, 0.25],
@@ -1232,18 +1209,7 @@ fn roller_constraint_weights_are_exact_line_integrals() {
         f(x[0] - p[0]) * f(x[1] - p[1])
     };
     for kind in [DirichletKind::Roller, DirichletKind::Fixed] {
-        let boundary = IbmBoundary {
-            name: "b".into(),
-            kind,
-            points: vec![a, m, b],
-            side: 1.0,
-            value: [0.0, 0.0],
-            gauss_points: 2,
-            exact_field: false,
-            fit_regularisation: None,
-            moves: false,
-            spline: None,
-        };
+        let boundary = polyline("b", kind, vec![a, m, b], 1.0);
         let weights = boundary.constraint_weights(&grid);
         let mut reference = vec![[[0.0; 2]; 2]; grid.num_nodes()];
         for (p, q) in [(a, m), (m, b)] {
