@@ -319,3 +319,49 @@ fn a_released_mapping_is_restored_to_the_same_stencils_and_groups() {
         assert!(!want.groups.is_empty());
     }
 }
+
+#[test]
+fn every_phase_a_step_runs_is_timed_and_the_phases_fit_in_its_total() {
+    // The step table's phases (mapping, pattern, assembly, factorisation,
+    // solve, update) are each accumulated from a clock around code that
+    // runs in every step of these scenes, so each is above 0 (the clock
+    // counts nanoseconds; each phase does microseconds of work at least),
+    // and they are disjoint parts of the step: their sum is at most the
+    // step's total. A linear step, Newton steps (several iterations, each
+    // assembling, factorising and solving) and explicit steps with the
+    // consistent mass (the explicit step times no mapping or pattern
+    // phase). Nothing here bounds how long a phase takes.
+    for (scene, steps) in [
+        ("block-roller-30", 1),
+        ("block-roller-finite-aligned", 2),
+        ("ghost-collision-elastic", 2),
+    ] {
+        let explicit = scene.starts_with("ghost");
+        let mut sim = sim_with(scene, |_| {});
+        for _ in 0..steps {
+            let r = sim.step().unwrap_or_else(|f| panic!("{scene}: {f}"));
+            let t = r.timings;
+            let phases = [
+                ("mapping", t.mapping),
+                ("pattern", t.pattern),
+                ("assembly", t.assembly),
+                ("factorisation", t.factorisation),
+                ("solve", t.solve),
+                ("update", t.update),
+            ];
+            for (name, v) in phases {
+                if explicit && (name == "mapping" || name == "pattern") {
+                    continue;
+                }
+                assert!(v > 0.0, "{scene} step {}: {name} {v}", r.step);
+            }
+            let sum: f64 = phases.iter().map(|p| p.1).sum::<f64>() + t.condition;
+            assert!(
+                sum <= t.total,
+                "{scene} step {}: phases {sum} > total {}",
+                r.step,
+                t.total
+            );
+        }
+    }
+}
