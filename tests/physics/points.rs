@@ -33,6 +33,21 @@ fn total_volume(text: &str) -> (f64, f64) {
     (m.points.vol.iter().sum(), m.bodies[0].region_area)
 }
 
+/// The most area clipping may leave out along a boundary of length
+/// `perimeter`: pieces under 1e-9 of their cell or sub-cell are dropped
+/// (`MIN_PIECE`, src/model/bodies.rs), at most one per cell and one per
+/// sub-cell the boundary crosses, and a straight boundary crosses at most
+/// `2 L / s + 2` cells of side `s` per segment (4 segments here, or the
+/// polygon's 7, counted as 8).
+fn left_out(perimeter: f64, ppc: usize) -> f64 {
+    let h = 0.5;
+    let sub = h / ppc as f64;
+    [h, sub]
+        .iter()
+        .map(|&s| 1e-9 * s * s * (2.0 * perimeter / s + 16.0))
+        .sum()
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(60))]
 
@@ -44,8 +59,12 @@ proptest! {
         );
         let (v, _) = total_volume(&scene(&region, ppc));
         let exact = 1.9 * 1.4;
-        // Sum of O(100) clipped areas each exact to round-off.
-        prop_assert!((v - exact).abs() < 1e-12 * exact, "{} vs {}", v, exact);
+        // Sum of O(100) clipped areas each exact to round-off, less the
+        // slivers too small to become points (2.0e-10 left out at 338.26
+        // deg, ox = 0.071, oy = 0, 1 point per cell: kept as a regression
+        // case).
+        let tol = 1e-12 * exact + left_out(2.0 * (1.9 + 1.4), ppc);
+        prop_assert!((v - exact).abs() < tol, "{} vs {}", v, exact);
     }
 
     #[test]
@@ -57,7 +76,8 @@ proptest! {
         let list: Vec<String> = pts.iter().map(|p| format!("[{}, {}]", p[0], p[1])).collect();
         let region = format!(r#"{{ shape = "polygon", vertices = [{}] }}"#, list.join(", "));
         let (vol, region_area) = total_volume(&scene(&region, ppc));
-        prop_assert!((vol - area).abs() < 1e-12 * area, "{} vs {}", vol, area);
+        let perimeter: f64 = (0..pts.len()).map(|k| { let (a, b) = (pts[k], pts[(k + 1) % pts.len()]); (b[0] - a[0]).hypot(b[1] - a[1]) }).sum();
+        prop_assert!((vol - area).abs() < 1e-12 * area + left_out(perimeter, ppc), "{} vs {}", vol, area);
         prop_assert!((region_area - area).abs() < 1e-12 * area);
     }
 }
