@@ -6,7 +6,7 @@ use common::{mpmlab, temp_path};
 use std::process::Command;
 
 /// The patch scene with `from` replaced by `to`, written to a temp file.
-fn broken(from: &str, to: &str) -> std::path::PathBuf {
+fn broken(from: &str, to: &str) -> common::TempPath {
     let text = std::fs::read_to_string(common::scene_path("patch-compression")).unwrap();
     assert!(text.contains(from), "{from}");
     let path = temp_path("broken", "toml");

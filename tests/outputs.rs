@@ -10,7 +10,7 @@ fn scene(name: &str) -> String {
 }
 
 /// A fresh folder for a test's files.
-fn temp_dir(name: &str) -> std::path::PathBuf {
+fn temp_dir(name: &str) -> common::TempPath {
     let d = temp_path(name, "d");
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();

@@ -4,7 +4,7 @@
 mod common;
 use common::{mpmlab, temp_path};
 use mpmlab::sweep::{from_csv, rates, RunResult};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 fn table(dir: &Path) -> Vec<RunResult> {
@@ -37,7 +37,7 @@ fn column_sweep(dir: &Path, jobs: &str) -> (i32, String, String) {
 
 #[test]
 fn small_sweep_table_rates_restart_and_charts() {
-    let dir: PathBuf = temp_path("sweep", "d");
+    let dir = temp_path("sweep", "d");
     let (code, out, err) = column_sweep(&dir, "2");
     assert_eq!(code, 0, "{out}{err}");
     let rows = table(&dir);
@@ -261,7 +261,7 @@ fn an_edited_scene_reruns_and_values_keep_their_spaces_out() {
 fn recorded_sweep_reports_recording_sizes() {
     // `--record`: each run writes recordings/<id>.rrd and its row holds the
     // recording's size, per step and per point; the cadence is a setting.
-    let dir: PathBuf = temp_path("sweep-record", "d");
+    let dir = temp_path("sweep-record", "d");
     let (code, out, err) = mpmlab(&[
         "sweep",
         "scenarios/column-small-strain.toml",
@@ -306,7 +306,7 @@ fn estimates_match_the_true_error_in_the_asymptotic_range() {
     // factor 2 of the true error (the criterion; measured
     // 0.99-1.01: the column is in its asymptotic range from h = 1, its
     // errors being exact powers of h).
-    let dir: PathBuf = temp_path("sweep-estimate", "d");
+    let dir = temp_path("sweep-estimate", "d");
     let (code, out, err) = mpmlab(&[
         "sweep",
         "scenarios/column-small-strain.toml",
@@ -390,7 +390,7 @@ fn a_target_search_predicts_and_meets_the_error() {
     // (H = 10 m): 2.5e-2 at h = 1, 1.25e-2 at 0.5. For a target of 1e-2
     // the observed order 1 predicts 6.25e-3 one halving on, at h = 0.25,
     // which the run must measure to round-off.
-    let dir: PathBuf = temp_path("sweep-target", "d");
+    let dir = temp_path("sweep-target", "d");
     let (code, out, err) = mpmlab(&[
         "sweep",
         "scenarios/column-small-strain.toml",

@@ -16,12 +16,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn temp_dir(stem: &str) -> PathBuf {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_nanos();
-    let d = std::env::temp_dir().join(format!("mpmlab-vtk-{stem}-{}-{nanos}", std::process::id()));
+/// A fresh folder for a test's files.
+fn temp_dir(stem: &str) -> common::TempPath {
+    let d = common::temp_path(&format!("vtk-{stem}"), "d");
     std::fs::create_dir_all(&d).unwrap();
     d
 }

@@ -3,7 +3,7 @@
 
 use mpmlab::scene::Scene;
 use mpmlab::{Model, Simulation, StepReport};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Path of a shipped scene.
 pub fn scene_path(name: &str) -> PathBuf {
@@ -38,13 +38,47 @@ pub fn error(r: &StepReport, name: &str) -> f64 {
         .value
 }
 
-/// A unique temporary file path.
-pub fn temp_path(stem: &str, ext: &str) -> PathBuf {
+/// A unique temporary path (a file or a folder; not created here).
+pub fn temp_path(stem: &str, ext: &str) -> TempPath {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
         .as_nanos();
-    std::env::temp_dir().join(format!("mpmlab-{stem}-{}-{nanos}.{ext}", std::process::id()))
+    TempPath(std::env::temp_dir().join(format!("mpmlab-{stem}-{}-{nanos}.{ext}", std::process::id())))
+}
+
+/// A temporary path that is removed with what it holds when the test ends,
+/// unless the test is failing: a failure leaves its files to look at.
+pub struct TempPath(PathBuf);
+
+impl std::ops::Deref for TempPath {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempPath {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempPath {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TempPath {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            return;
+        }
+        // Either a file or a folder, or nothing if the test removed it.
+        let _ = std::fs::remove_file(&self.0);
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// Every data chunk of the recording store in an `.rrd` file, decoded with
