@@ -132,6 +132,19 @@ impl Band<'_> {
 struct LoadBlock {
     boundary: usize,
     nodes: Vec<usize>,
+    /// The columns of the load stiffness: the nodes that move the
+    /// boundary's points.
+    columns: Vec<LoadColumn>,
+}
+
+/// A node that moves some of a boundary's points (by their indices in the
+/// boundary) and the segments of its spline those points shape (point `i`
+/// shapes segments `i - 3 ..= i + 2`,
+/// [`crate::boundary::bspline::Interpolation`]).
+struct LoadColumn {
+    node: usize,
+    points: Vec<usize>,
+    segments: Vec<usize>,
 }
 
 /// Assembly blocks: point groups, ghost faces, band blocks, load blocks.
@@ -147,6 +160,49 @@ fn newton_blocks<'a>(
     }
     blocks.extend(loads.iter().map(|l| l.nodes.as_slice()));
     blocks
+}
+
+/// The columns of boundary `b`'s load stiffness: each node of `nodes`
+/// whose stencils move some of its points, those points, and the segments
+/// they shape (wrapped on a closed curve, clipped on an open one).
+fn load_columns(b: &crate::boundary::Boundary, map: &Mapping, nodes: &[usize]) -> Vec<LoadColumn> {
+    let n = b.points.len() as isize;
+    let segments = if b.closed { n } else { n - 1 };
+    let mut moves: Vec<(usize, usize)> = Vec::new();
+    for (i, &p) in b.points.iter().enumerate() {
+        moves.extend(
+            map.stencils
+                .get(p)
+                .nodes()
+                .filter(|n| nodes.binary_search(n).is_ok())
+                .map(|n| (n, i)),
+        );
+    }
+    moves.sort_unstable();
+    moves.dedup();
+    let mut columns: Vec<LoadColumn> = Vec::new();
+    for (node, i) in moves {
+        if columns.last().is_none_or(|c| c.node != node) {
+            columns.push(LoadColumn {
+                node,
+                points: Vec::new(),
+                segments: Vec::new(),
+            });
+        }
+        let c = columns.last_mut().expect("pushed above");
+        c.points.push(i);
+        for k in (i as isize - 3)..=(i as isize + 2) {
+            let k = if b.closed { k.rem_euclid(n) } else { k };
+            if (0..segments).contains(&k) {
+                c.segments.push(k as usize);
+            }
+        }
+    }
+    for c in &mut columns {
+        c.segments.sort_unstable();
+        c.segments.dedup();
+    }
+    columns
 }
 
 /// What one Newton step keeps fixed over its iterations: the mapping and
@@ -281,7 +337,12 @@ impl<'a> Setup<'a> {
                 .collect();
             nodes.sort_unstable();
             nodes.dedup();
-            loads.push(LoadBlock { boundary: k, nodes });
+            let columns = load_columns(b, &map, &nodes);
+            loads.push(LoadBlock {
+                boundary: k,
+                nodes,
+                columns,
+            });
         }
         let symmetry = if sim.model.analysis.fbar || !loads.is_empty() {
             Symmetry::General
@@ -440,38 +501,57 @@ impl<'a> Setup<'a> {
     /// positions keeps the motions Newton takes: points of one cell stay
     /// collinear under `S d`, where B's tangent weights `|q x q|` are not
     /// differentiable in a single point's position.
+    ///
+    /// Each difference re-interpolates and re-integrates only the segments
+    /// the moved points shape (the interpolation is local), with the
+    /// collinearity tolerance of the unperturbed curve: the block costs
+    /// time in proportion to the boundary's length, not its square.
     fn load_block(&self, l: &LoadBlock, d: &[P2], out: &mut Vec<f64>) -> Result<(), StepFailure> {
-        let b = &self.sim.model.boundaries[l.boundary];
+        use crate::boundary::bspline::Interpolation;
+        let model = &self.sim.model;
+        let b = &model.boundaries[l.boundary];
         let m2 = 2 * l.nodes.len();
         out.clear();
         out.resize(m2 * m2, 0.0);
         let local = |n: usize| l.nodes.binary_search(&n).ok();
-        let eps = 1e-6 * self.sim.model.grid.h;
-        let mut columns: Vec<usize> = b
-            .points
-            .iter()
-            .flat_map(|&p| self.map.stencils.get(p).nodes())
-            .filter(|&n| local(n).is_some())
-            .collect();
-        columns.sort_unstable();
-        columns.dedup();
-        let mut shifted = d.to_vec();
-        for &m in &columns {
-            let bb = local(m).expect("filtered above");
+        let eps = 1e-6 * model.grid.h;
+        let x0: Vec<P2> = b.points.iter().map(|&p| self.moved(p, d)).collect();
+        // The unperturbed curve's checks and collinearity scale.
+        let scale = Interpolation::new(&x0, b.closed, &b.corners)
+            .map_err(|e| StepFailure::Boundary {
+                step: self.step,
+                name: b.name.clone(),
+                reason: e.to_string(),
+            })?
+            .scale();
+        let (mut xs, mut shifted) = (x0.clone(), d.to_vec());
+        for col in &l.columns {
+            let (m, bb) = (col.node, local(col.node).expect("columns are block nodes"));
             for k in 0..2 {
-                let mut at = |delta: f64| -> Result<Vec<(usize, P2)>, StepFailure> {
-                    shifted[m][k] = d[m][k] + delta;
-                    let xs: Vec<P2> = b.points.iter().map(|&p| self.moved(p, &shifted)).collect();
+                for sign in [1.0, -1.0] {
+                    shifted[m][k] = d[m][k] + sign * eps;
+                    for &i in &col.points {
+                        xs[i] = self.moved(b.points[i], &shifted);
+                    }
                     shifted[m][k] = d[m][k];
-                    Ok(self.traction(l.boundary, &xs)?.0)
-                };
-                let (fp, fm) = (at(eps)?, at(-eps)?);
-                for (sign, forces) in [(1.0, fp), (-1.0, fm)] {
-                    for (n, f) in forces {
-                        let Some(a) = local(n) else { continue };
-                        for i in 0..2 {
-                            out[(2 * a + i) * m2 + 2 * bb + k] -= sign * self.lambda * f[i] / (2.0 * eps);
-                        }
+                    let spline = Interpolation::with_scale(&xs, b.closed, &b.corners, scale).spline_of(&col.segments);
+                    let pieces = crate::boundary::intersect::split(&spline, &model.grid);
+                    crate::boundary::integrate_traction(
+                        b,
+                        &spline,
+                        &pieces,
+                        &model.grid,
+                        model.exact.as_ref(),
+                        |n, f| {
+                            if let (Some(a), true) = (local(n), self.map.dofs.node_dof[n][0] != Dof::Inactive) {
+                                for i in 0..2 {
+                                    out[(2 * a + i) * m2 + 2 * bb + k] -= sign * self.lambda * f[i] / (2.0 * eps);
+                                }
+                            }
+                        },
+                    );
+                    for &i in &col.points {
+                        xs[i] = x0[i];
                     }
                 }
             }

@@ -68,101 +68,174 @@ impl std::fmt::Display for SplineError {
     }
 }
 
-impl BSpline {
-    /// Interpolate `points`; `corners[k]` marks point `k` as a corner.
-    pub fn interpolate(points: &[P2], closed: bool, corners: &[bool]) -> Result<BSpline, SplineError> {
+/// The local interpolation of one set of points: everything segment `k`
+/// needs, from the points around it (segment `k` depends on points
+/// `k - 2 ..= k + 3` only, through the chords `q_{k-1} .. q_{k+3}`).
+pub struct Interpolation<'a> {
+    points: &'a [P2],
+    closed: bool,
+    corners: &'a [bool],
+    /// The longest chord: cross products at or below `1e-12 scale^2`
+    /// count as zero (collinear chords).
+    scale: f64,
+}
+
+impl<'a> Interpolation<'a> {
+    /// Check `points` and set up their interpolation; `corners[k]` marks
+    /// point `k` as a corner.
+    pub fn new(points: &'a [P2], closed: bool, corners: &'a [bool]) -> Result<Interpolation<'a>, SplineError> {
         let n = points.len();
         if n < 3 {
             return Err(SplineError::TooFewPoints(n));
         }
-        let m = if closed { n } else { n - 1 }; // number of segments
+        let m = if closed { n } else { n - 1 };
         for k in 0..m {
             if norm(sub(points[(k + 1) % n], points[k])) == 0.0 {
                 return Err(SplineError::RepeatedPoint(k));
             }
         }
-        // Chords q_k = Q_k - Q_{k-1} for k = -1 ..= n + 2, stored at k + 1.
-        let mut q = vec![[0.0; 2]; n + 4];
-        for k in -1..=(n as isize + 2) {
-            let i = (k + 1) as usize;
-            if closed {
-                let a = k.rem_euclid(n as isize) as usize;
-                let b = (k - 1).rem_euclid(n as isize) as usize;
-                q[i] = sub(points[a], points[b]);
-            } else if (1..n as isize).contains(&k) {
-                q[i] = sub(points[k as usize], points[k as usize - 1]);
-            }
-        }
-        if !closed {
-            let at = |k: isize| (k + 1) as usize;
-            let ext = |a: P2, b: P2| [2.0 * a[0] - b[0], 2.0 * a[1] - b[1]];
-            q[at(0)] = ext(q[at(1)], q[at(2)]);
-            q[at(-1)] = ext(q[at(0)], q[at(1)]);
-            let nn = n as isize;
-            q[at(nn)] = ext(q[at(nn - 1)], q[at(nn - 2)]);
-            q[at(nn + 1)] = ext(q[at(nn)], q[at(nn - 1)]);
-        }
-        let qk = |k: usize| q[k + 1]; // q_k for k >= -1 shifted: qk(k) = q_k with k as usize
-                                      // Tangents: incoming (end of the segment arriving at k) and outgoing.
-        let mut t_in = vec![[0.0; 2]; n];
-        let mut t_out = vec![[0.0; 2]; n];
         let scale = (0..m)
             .map(|k| norm(sub(points[(k + 1) % n], points[k])))
             .fold(0.0, f64::max);
-        for k in 0..n {
-            // q_{k-1}, q_k, q_{k+1}, q_{k+2} are at indices k, k+1, k+2, k+3.
-            let (qm, q0, q1, q2) = (q[k], qk(k), qk(k + 1), qk(k + 2));
-            let a1 = cross(qm, q0).abs();
-            let a2 = cross(q1, q2).abs();
-            let tol = 1e-12 * scale * scale;
-            let end = !closed && (k == 0 || k == n - 1);
-            let marked = corners.get(k).copied().unwrap_or(false);
-            let detected = a1 <= tol && a2 <= tol && cross(q0, q1).abs() > tol;
-            if !end && (marked || detected) {
-                t_in[k] = unit(q0);
-                t_out[k] = unit(q1);
-                continue;
-            }
-            let alpha = if a1 + a2 <= tol { 0.5 } else { a1 / (a1 + a2) };
-            let v = [
-                (1.0 - alpha) * q0[0] + alpha * q1[0],
-                (1.0 - alpha) * q0[1] + alpha * q1[1],
-            ];
-            let t = unit(v);
-            t_in[k] = t;
-            t_out[k] = t;
+        Ok(Interpolation::with_scale(points, closed, corners, scale))
+    }
+
+    /// As [`Interpolation::new`] with the longest chord `scale` given (and
+    /// the points not checked): for points that differ from checked ones
+    /// by a perturbation, whose collinearity tolerance stays that of the
+    /// unperturbed points.
+    pub fn with_scale(points: &'a [P2], closed: bool, corners: &'a [bool], scale: f64) -> Interpolation<'a> {
+        Interpolation {
+            points,
+            closed,
+            corners,
+            scale,
         }
-        let mut segments = Vec::with_capacity(m);
-        let mut knots = vec![0.0];
-        for k in 0..m {
-            let (a, b) = (points[k], points[(k + 1) % n]);
-            let (ta, tb) = (t_out[k], t_in[(k + 1) % n]);
-            let ts = [ta[0] + tb[0], ta[1] + tb[1]];
-            let d = sub(b, a);
-            let qa = 16.0 - (ts[0] * ts[0] + ts[1] * ts[1]);
-            let qb = 12.0 * (d[0] * ts[0] + d[1] * ts[1]);
-            let qc = -36.0 * (d[0] * d[0] + d[1] * d[1]);
-            // qa >= 12 and qc < 0: one positive root; the stable form avoids cancellation.
-            let disc = (qb * qb - 4.0 * qa * qc).sqrt();
-            let s = if qb >= 0.0 {
-                -2.0 * qc / (qb + disc)
-            } else {
-                (disc - qb) / (2.0 * qa)
-            };
-            segments.push([
+    }
+
+    /// The longest chord (m), which sets the collinearity tolerance.
+    pub fn scale(&self) -> f64 {
+        self.scale
+    }
+
+    /// Number of segments.
+    pub fn segments(&self) -> usize {
+        let n = self.points.len();
+        if self.closed {
+            n
+        } else {
+            n - 1
+        }
+    }
+
+    /// The chord `q_k = Q_k - Q_{k-1}` for `k` in `-1 ..= n + 1`: wrapped on
+    /// a closed curve, extrapolated past the ends of an open one
+    /// (`q_0 = 2 q_1 - q_2`, `q_{-1} = 2 q_0 - q_1`, `q_n = 2 q_{n-1} -
+    /// q_{n-2}`, `q_{n+1} = 2 q_n - q_{n-1}`).
+    fn chord(&self, k: isize) -> P2 {
+        let (p, n) = (self.points, self.points.len() as isize);
+        let ext = |a: P2, b: P2| [2.0 * a[0] - b[0], 2.0 * a[1] - b[1]];
+        if self.closed {
+            sub(p[k.rem_euclid(n) as usize], p[(k - 1).rem_euclid(n) as usize])
+        } else if (1..n).contains(&k) {
+            sub(p[k as usize], p[k as usize - 1])
+        } else if k == 0 {
+            ext(self.chord(1), self.chord(2))
+        } else if k == -1 {
+            ext(self.chord(0), self.chord(1))
+        } else if k == n {
+            ext(self.chord(n - 1), self.chord(n - 2))
+        } else {
+            ext(self.chord(n), self.chord(n - 1))
+        }
+    }
+
+    /// Unit tangents at point `k`: `(incoming, outgoing)`, equal but at a
+    /// corner (B (9)-(10)).
+    fn tangents(&self, k: usize) -> (P2, P2) {
+        let n = self.points.len();
+        let ki = k as isize;
+        let (qm, q0, q1, q2) = (
+            self.chord(ki - 1),
+            self.chord(ki),
+            self.chord(ki + 1),
+            self.chord(ki + 2),
+        );
+        let a1 = cross(qm, q0).abs();
+        let a2 = cross(q1, q2).abs();
+        let tol = 1e-12 * self.scale * self.scale;
+        let end = !self.closed && (k == 0 || k == n - 1);
+        let marked = self.corners.get(k).copied().unwrap_or(false);
+        let detected = a1 <= tol && a2 <= tol && cross(q0, q1).abs() > tol;
+        if !end && (marked || detected) {
+            return (unit(q0), unit(q1));
+        }
+        let alpha = if a1 + a2 <= tol { 0.5 } else { a1 / (a1 + a2) };
+        let v = [
+            (1.0 - alpha) * q0[0] + alpha * q1[0],
+            (1.0 - alpha) * q0[1] + alpha * q1[1],
+        ];
+        let t = unit(v);
+        (t, t)
+    }
+
+    /// Segment `k`: its control points and its knot span `s_k` (B (11)-(12)).
+    pub fn segment(&self, k: usize) -> ([P2; 4], f64) {
+        let (p, n) = (self.points, self.points.len());
+        let (a, b) = (p[k], p[(k + 1) % n]);
+        let (ta, tb) = (self.tangents(k).1, self.tangents((k + 1) % n).0);
+        let ts = [ta[0] + tb[0], ta[1] + tb[1]];
+        let d = sub(b, a);
+        let qa = 16.0 - (ts[0] * ts[0] + ts[1] * ts[1]);
+        let qb = 12.0 * (d[0] * ts[0] + d[1] * ts[1]);
+        let qc = -36.0 * (d[0] * d[0] + d[1] * d[1]);
+        // qa >= 12 and qc < 0: one positive root; the stable form avoids cancellation.
+        let disc = (qb * qb - 4.0 * qa * qc).sqrt();
+        let s = if qb >= 0.0 {
+            -2.0 * qc / (qb + disc)
+        } else {
+            (disc - qb) / (2.0 * qa)
+        };
+        (
+            [
                 a,
                 [a[0] + s / 3.0 * ta[0], a[1] + s / 3.0 * ta[1]],
                 [b[0] - s / 3.0 * tb[0], b[1] - s / 3.0 * tb[1]],
                 b,
-            ]);
-            knots.push(knots[k] + s);
+            ],
+            s,
+        )
+    }
+
+    /// The curve made of segments `ks` only, in that order (an open curve
+    /// whose segment `i` is segment `ks[i]` of the whole; its knots are
+    /// those segments' spans, normalised).
+    pub fn spline_of(&self, ks: &[usize]) -> BSpline {
+        let mut segments = Vec::with_capacity(ks.len());
+        let mut knots = vec![0.0];
+        for (i, &k) in ks.iter().enumerate() {
+            let (c, s) = self.segment(k);
+            segments.push(c);
+            knots.push(knots[i] + s);
         }
-        let total = knots[m];
+        let total = knots[ks.len()];
         knots.iter_mut().for_each(|u| *u /= total);
-        Ok(BSpline {
+        BSpline {
             segments,
             knots,
+            closed: false,
+        }
+    }
+}
+
+impl BSpline {
+    /// Interpolate `points`; `corners[k]` marks point `k` as a corner.
+    pub fn interpolate(points: &[P2], closed: bool, corners: &[bool]) -> Result<BSpline, SplineError> {
+        let it = Interpolation::new(points, closed, corners)?;
+        let all: Vec<usize> = (0..it.segments()).collect();
+        Ok(BSpline {
             closed,
+            ..it.spline_of(&all)
         })
     }
 

@@ -91,47 +91,16 @@ pub fn traction_forces(
     cells.dedup();
     let mut forces = Vec::new();
     let (mut resultant, mut lost) = ([0.0; 2], [0.0; 2]);
-    if let Some(t) = &b.traction {
-        let (xg, wg) = gauss_legendre(b.gauss_points);
-        for pc in &pieces {
-            let half = 0.5 * (pc.t1 - pc.t0);
-            for (xi, wi) in xg.iter().zip(&wg) {
-                let tp = pc.t0 + half * (1.0 + xi);
-                let x = spline.point(pc.segment, tp);
-                let d = spline.d1(pc.segment, tp);
-                let speed = d[0].hypot(d[1]);
-                let rn = spline.right_normal(pc.segment, tp);
-                let n = [b.outward * rn[0], b.outward * rn[1]];
-                let tv = match t {
-                    Traction::Vector(v) => *v,
-                    Traction::Pressure(p) => [-p * n[0], -p * n[1]],
-                    Traction::ExactStress => match exact {
-                        Some(e) => {
-                            let s = e.stress(x);
-                            [s[0] * n[0] + s[2] * n[1], s[2] * n[0] + s[1] * n[1]]
-                        }
-                        None => [0.0; 2],
-                    },
-                };
-                let jw = speed * half * wi;
-                let st = stencil(grid, BasisKind::Standard, x, [0.0; 2]);
-                for (node, w, _) in st.view().iter() {
-                    if w == 0.0 {
-                        continue;
-                    }
-                    let f = [w * tv[0] * jw, w * tv[1] * jw];
-                    resultant[0] += f[0];
-                    resultant[1] += f[1];
-                    if active(node) {
-                        forces.push((node, f));
-                    } else {
-                        lost[0] += f[0];
-                        lost[1] += f[1];
-                    }
-                }
-            }
+    integrate_traction(b, spline, &pieces, grid, exact, |node, f| {
+        resultant[0] += f[0];
+        resultant[1] += f[1];
+        if active(node) {
+            forces.push((node, f));
+        } else {
+            lost[0] += f[0];
+            lost[1] += f[1];
         }
-    }
+    });
     let report = BoundaryReport {
         name: b.name.clone(),
         length: spline.length(),
@@ -141,4 +110,52 @@ pub fn traction_forces(
         lost: load_factor * lost[0].hypot(lost[1]),
     };
     (forces, report)
+}
+
+/// B (13)-(17): the traction of boundary `b` (at load factor 1) over
+/// `pieces` of `spline`, node by node: `force(node, f)` for every
+/// quadrature point and grid node of its stencil (N per unit thickness).
+/// Nothing when the boundary carries no traction.
+pub fn integrate_traction(
+    b: &Boundary,
+    spline: &BSpline,
+    pieces: &[intersect::Piece],
+    grid: &Grid,
+    exact: Option<&ExactSolution>,
+    mut force: impl FnMut(usize, P2),
+) {
+    let Some(t) = &b.traction else {
+        return;
+    };
+    let (xg, wg) = gauss_legendre(b.gauss_points);
+    for pc in pieces {
+        let half = 0.5 * (pc.t1 - pc.t0);
+        for (xi, wi) in xg.iter().zip(&wg) {
+            let tp = pc.t0 + half * (1.0 + xi);
+            let x = spline.point(pc.segment, tp);
+            let d = spline.d1(pc.segment, tp);
+            let speed = d[0].hypot(d[1]);
+            let rn = spline.right_normal(pc.segment, tp);
+            let n = [b.outward * rn[0], b.outward * rn[1]];
+            let tv = match t {
+                Traction::Vector(v) => *v,
+                Traction::Pressure(p) => [-p * n[0], -p * n[1]],
+                Traction::ExactStress => match exact {
+                    Some(e) => {
+                        let s = e.stress(x);
+                        [s[0] * n[0] + s[2] * n[1], s[2] * n[0] + s[1] * n[1]]
+                    }
+                    None => [0.0; 2],
+                },
+            };
+            let jw = speed * half * wi;
+            let st = stencil(grid, BasisKind::Standard, x, [0.0; 2]);
+            for (node, w, _) in st.view().iter() {
+                if w == 0.0 {
+                    continue;
+                }
+                force(node, [w * tv[0] * jw, w * tv[1] * jw]);
+            }
+        }
+    }
 }

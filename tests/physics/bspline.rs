@@ -2,7 +2,7 @@
 //! runs and corners, convergence to a circle, Gauss integration along
 //! pieces, and splitting at grid lines.
 
-use mpmlab::boundary::bspline::BSpline;
+use mpmlab::boundary::bspline::{BSpline, Interpolation};
 use mpmlab::boundary::intersect::split;
 use mpmlab::grid::Grid;
 use mpmlab::quadrature::gauss_legendre;
@@ -80,6 +80,56 @@ proptest! {
                     "piece {:?} leaves cell ({}, {}) at {:?}", p, i, j, x);
             }
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(100))]
+
+    /// The interpolation is local: segment `k` is a function of points
+    /// `k - 2 ..= k + 3` alone (the follower load stiffness re-interpolates
+    /// only the segments a moved point shapes, `i - 3 ..= i + 2`). Moving
+    /// one point leaves every other segment bit for bit, and a segment
+    /// built on its own is the whole curve's segment bit for bit.
+    #[test]
+    fn moving_a_point_changes_only_the_six_segments_it_shapes(
+        seed in prop::collection::vec(0.0f64..1.0, 12..30),
+        closed: bool,
+        corner in 0usize..15,
+        pick in 0usize..15,
+        distance in 0.01f64..0.2,
+        angle in 0.0f64..std::f64::consts::TAU,
+    ) {
+        let q = random_points(&seed);
+        let n = q.len();
+        let mut corners = vec![false; n];
+        corners[corner % n] = true;
+        let whole = BSpline::interpolate(&q, closed, &corners).unwrap();
+        let it = Interpolation::new(&q, closed, &corners).unwrap();
+        for k in 0..whole.segments.len() {
+            prop_assert_eq!(it.spline_of(&[k]).segments[0], whole.segments[k]);
+        }
+        let i = pick % n;
+        let mut moved = q.clone();
+        moved[i] = [q[i][0] + distance * angle.cos(), q[i][1] + distance * angle.sin()];
+        let after = Interpolation::with_scale(&moved, closed, &corners, it.scale());
+        let m = whole.segments.len() as isize;
+        let shaped: Vec<usize> = (i as isize - 3..=i as isize + 2)
+            .map(|k| if closed { k.rem_euclid(m) } else { k })
+            .filter(|k| (0..m).contains(k))
+            .map(|k| k as usize)
+            .collect();
+        let mut changed = 0;
+        for k in 0..whole.segments.len() {
+            let seg = after.spline_of(&[k]).segments[0];
+            if shaped.contains(&k) {
+                changed += usize::from(seg != whole.segments[k]);
+            } else {
+                prop_assert_eq!(seg, whole.segments[k], "segment {} of {} moved with point {}", k, m, i);
+            }
+        }
+        // The point's own two segments always change.
+        prop_assert!(changed >= 1);
     }
 }
 
