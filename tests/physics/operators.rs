@@ -977,6 +977,24 @@ fn straight_boundary_traction_is_the_exact_line_integral() {
     // Resultant: t times the length.
     assert!((report.resultant[0] - t[0] * len).abs() < 1e-13 * len * 7.0);
     assert!((report.resultant[1] - t[1] * len).abs() < 1e-13 * len * 7.0);
+    // Within a load step the report scales with the load factor and the
+    // forces stay at factor 1; the share on a node no point touches is
+    // lost (reported, not applied).
+    let gone = (0..grid.num_nodes())
+        .find(|&n| got[n][0] != 0.0)
+        .expect("the line loads some node");
+    let lambda = 0.35;
+    let (partial, report) = traction_forces(&boundary, &spline, &grid, None, &|n| n != gone, lambda);
+    let applied = summed(&partial, grid.num_nodes());
+    for n in 0..grid.num_nodes() {
+        let expected = if n == gone { [0.0; 2] } else { got[n] };
+        assert_eq!(applied[n], expected, "node {n}");
+    }
+    for c in 0..2 {
+        assert!((report.resultant[c] - lambda * t[c] * len).abs() < 1e-13 * len * 7.0);
+    }
+    let lost = lambda * got[gone][0].hypot(got[gone][1]);
+    assert!((report.lost - lost).abs() < 1e-15 * lost, "{} vs {lost}", report.lost);
 }
 
 /// Nodal forces of a pressure `p` on a circle (centre `c`, radius `rad`)
