@@ -56,6 +56,13 @@ fn tangent_of_every_contribution_matches_finite_differences() {
             sim_with("cantilever-follower-pressure-finite", |_| {}),
         ),
         (
+            // GIMP stencils move a boundary point by more nodes.
+            "follower pressure, GIMP",
+            sim_with("cantilever-follower-pressure-finite", |s| {
+                s.bodies[0].basis = mpmlab::basis::BasisKind::Gimp;
+            }),
+        ),
+        (
             // A closed curve: its load columns wrap around the last point.
             "follower pressure on a closed ring of tracking points",
             sim_with("cantilever-follower-pressure-finite", |s| {
