@@ -556,22 +556,8 @@ fn threads_give_the_serial_run_to_the_bit() {
 /// (m/s^2), for `duration` s in `steps` steps, cut back at most
 /// `max_cutbacks` halvings deep.
 fn flying_ghost(speed: f64, gx: f64, duration: f64, steps: usize, max_cutbacks: usize) -> Simulation {
-    let text = format!(
+    let body = format!(
         r#"
-[scene]
-name = "flying-ghost"
-
-[grid]
-origin = [0.0, 0.0]
-size = [3.0, 1.0]
-h = 0.1
-
-[[material]]
-name = "jelly"
-E = 1000.0
-nu = 0.3
-density = 1000.0
-
 [[body]]
 name = "ghost"
 material = "jelly"
@@ -583,7 +569,32 @@ region = {{ shape = "ghost", min = [0.3, 0.3], size = 0.4 }}
 velocity = [{speed:?}, 0.0]
 velocity_gradient = [[1.0, 0.0], [0.0, 1.0]]
 velocity_centre = [0.5, 0.5]
+"#
+    );
+    jelly("flying-ghost", &body, gx, duration, steps, max_cutbacks)
+}
 
+/// An explicit run (stabilised mass, USF, FLIP) of `body` made of a
+/// 1000 kg/m^3 jelly (E = 1 kPa) on a 3 m x 1 m grid of h = 0.1 m, under
+/// gravity `gx` (m/s^2) along x, for `duration` s in `steps` steps, cut
+/// back at most `max_cutbacks` halvings deep.
+fn jelly(name: &str, body: &str, gx: f64, duration: f64, steps: usize, max_cutbacks: usize) -> Simulation {
+    let text = format!(
+        r#"
+[scene]
+name = "{name}"
+
+[grid]
+origin = [0.0, 0.0]
+size = [3.0, 1.0]
+h = 0.1
+
+[[material]]
+name = "jelly"
+E = 1000.0
+nu = 0.3
+density = 1000.0
+{body}
 [loads]
 gravity = [{gx:?}, 0.0]
 
@@ -598,7 +609,7 @@ condition_every = 0
 max_cutbacks = {max_cutbacks}
 "#
     );
-    Simulation::new(mpmlab::Model::from_text(&text, "flying-ghost.toml").unwrap_or_else(|e| panic!("{e}")))
+    Simulation::new(mpmlab::Model::from_text(&text, &format!("{name}.toml")).unwrap_or_else(|e| panic!("{e}")))
 }
 
 /// Every field a step updates, per point, as bits: equal vectors are the
@@ -795,43 +806,14 @@ fn free_fall_kinetic_energy_and_gravity_work_are_closed_forms() {
     // f . v_{n+1} dt, is M g^2 dt^2 n (n + 1) / 2 (the rule's first-order
     // error is then the energy balance, -M g^2 dt^2 n / 2).
     let (g, dt, steps) = (2.0, 0.01, 10);
-    let text = format!(
-        r#"
-[scene]
-name = "free-fall"
-
-[grid]
-origin = [0.0, 0.0]
-size = [2.0, 1.0]
-h = 0.1
-
-[[material]]
-name = "jelly"
-E = 1000.0
-nu = 0.3
-density = 1000.0
-
+    let block = r#"
 [[body]]
 name = "block"
 material = "jelly"
 points_per_cell = 2
-region = {{ shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }}
-
-[loads]
-gravity = [{g:?}, 0.0]
-
-[analysis]
-kind = "explicit-dynamics"
-duration = {:?}
-load_steps = {steps}
-mass = "stabilised"
-stress_update = "usf"
-velocity_update = "flip"
-condition_every = 0
-"#,
-        dt * steps as f64
-    );
-    let mut sim = Simulation::new(mpmlab::Model::from_text(&text, "free-fall.toml").unwrap_or_else(|e| panic!("{e}")));
+region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
+"#;
+    let mut sim = jelly("free-fall", block, g, dt * steps as f64, steps, 0);
     let reports = run(&mut sim);
     let mass = 1000.0 * 0.4 * 0.4;
     // Round-off: a mass solve (condition below 1e3) per step, summed over
