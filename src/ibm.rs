@@ -1027,6 +1027,19 @@ impl IbmStep<'_> {
     }
 }
 
+/// The nodes' whole motion: the increments `d` plus the implicit
+/// boundaries' prescribed `d^a` (just `d` without them).
+pub fn nodal_motion(nodal_d: &[P2], ibm: Option<&IbmStep>) -> Vec<P2> {
+    match ibm {
+        Some(s) => nodal_d
+            .iter()
+            .zip(&s.da)
+            .map(|(a, b)| [a[0] + b[0], a[1] + b[1]])
+            .collect(),
+        None => nodal_d.to_vec(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -72,7 +72,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
     let faces = setup.faces.clone();
     // The penalty's force and work on the nodes' whole motion d + d^a.
-    let nodal = nodal_motion(&nodal_increments(map, &du), setup.ibm.as_ref());
+    let nodal = ibm::nodal_motion(&nodal_increments(map, &du), setup.ibm.as_ref());
     let ghost_force = ghost::force(&faces, sim.params.gamma_k, &nodal);
     let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &nodal);
     drop(setup);
@@ -457,7 +457,7 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
     let d_of = |p: usize| sim.material_of(p).d_matrix();
     let nodal_d = nodal_increments(map, du);
     // Points move with N (d + d^a); those inside a band with D N d + N d^a.
-    let nodal = nodal_motion(&nodal_d, setup.ibm.as_ref());
+    let nodal = ibm::nodal_motion(&nodal_d, setup.ibm.as_ref());
     let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
     let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal, step)?;
     let mut ibm_reports = Vec::new();
@@ -583,19 +583,6 @@ fn point_ibm_reports(
         sim.model.exact.as_ref(),
         lambda1 - lambda0,
     )
-}
-
-/// The nodes' whole motion: the increments `d` plus the implicit
-/// boundaries' prescribed `d^a` (just `d` without them).
-fn nodal_motion(nodal_d: &[P2], ibm: Option<&IbmStep>) -> Vec<P2> {
-    match ibm {
-        Some(s) => nodal_d
-            .iter()
-            .zip(&s.da)
-            .map(|(a, b)| [a[0] + b[0], a[1] + b[1]])
-            .collect(),
-        None => nodal_d.to_vec(),
-    }
 }
 
 /// The fields a small-strain step writes after applying nodal increments

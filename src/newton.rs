@@ -382,9 +382,9 @@ impl<'a> Setup<'a> {
         newton_blocks(&self.map, &self.faces, &self.band, &self.loads)
     }
 
-    /// `d^a` per node (zero without implicit boundaries).
-    fn da(&self, n: usize) -> P2 {
-        self.band.as_ref().map_or([0.0; 2], |b| b.step.da[n])
+    /// The nodes' whole motion `d + d^a` at unknowns `d` ([`crate::ibm::nodal_motion`]).
+    fn motion(&self, d: &[P2]) -> Vec<P2> {
+        crate::ibm::nodal_motion(d, self.band.as_ref().map(|b| &b.step))
     }
 
     /// Where point `p` is at unknowns `d`: `x + D S d + S d^a`.
@@ -425,19 +425,9 @@ impl<'a> Setup<'a> {
     /// components included).
     fn residual(&self, d: &[P2]) -> Result<Residual, StepFailure> {
         let map = &self.map;
-        let total: Vec<P2>;
-        let it = match &self.band {
-            None => evaluate_with(self.sim, map, d, None),
-            Some(b) => {
-                total = d
-                    .iter()
-                    .zip(&b.step.da)
-                    .map(|(a, e)| [a[0] + e[0], a[1] + e[1]])
-                    .collect();
-                evaluate_with(self.sim, map, &total, Some((&b.ops, d, &b.step.da)))
-            }
-        }
-        .map_err(|e| e.at_step(self.step))?;
+        let motion = self.motion(d);
+        let band = self.band.as_ref().map(|b| (&b.ops[..], d, &b.step.da[..]));
+        let it = evaluate_with(self.sim, map, &motion, band).map_err(|e| e.at_step(self.step))?;
         let mut fext = self.dead.clone();
         for l in &self.loads {
             let b = &self.sim.model.boundaries[l.boundary];
@@ -461,10 +451,7 @@ impl<'a> Setup<'a> {
                     let Dof::Free(i) = map.dofs.node_dof[f.nodes[row]][c] else {
                         continue;
                     };
-                    fg[i] += self.gamma
-                        * (0..6)
-                            .map(|k| f.j[row][k] * (d[f.nodes[k]][c] + self.da(f.nodes[k])[c]))
-                            .sum::<f64>();
+                    fg[i] += self.gamma * (0..6).map(|k| f.j[row][k] * motion[f.nodes[k]][c]).sum::<f64>();
                 }
             }
         }
@@ -729,12 +716,7 @@ fn increment(
     timings.update = t.elapsed().as_secs_f64();
     // 5. Commit and report.
     let (faces, boundaries) = (setup.faces.clone(), setup.boundaries.clone());
-    let motion: Vec<P2> = (0..solved.d.len())
-        .map(|n| {
-            let a = setup.da(n);
-            [solved.d[n][0] + a[0], solved.d[n][1] + a[1]]
-        })
-        .collect();
+    let motion = setup.motion(&solved.d);
     let ghost_force = ghost::force(&faces, setup.gamma, &motion);
     let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &motion);
     let map = &setup.map;
@@ -966,12 +948,7 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
         linalg::FactorError::allocation("the points' new state", old.len().saturating_mul(145)).at_step(setup.step)
     })?;
     let (mut strain_energy, mut dissipation) = (0.0, 0.0);
-    let total: Vec<P2> = (0..d.len())
-        .map(|n| {
-            let a = setup.da(n);
-            [d[n][0] + a[0], d[n][1] + a[1]]
-        })
-        .collect();
+    let total = setup.motion(d);
     for p in 0..pts.len() {
         let st = map.stencils.get(p);
         let x = setup.moved(p, d);
