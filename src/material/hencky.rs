@@ -47,6 +47,19 @@ pub struct Response {
     pub yielding: bool,
 }
 
+/// The principal return map's result for one trial strain.
+struct Principal {
+    /// Kirchhoff principal stresses `t_a` (Pa).
+    tau: [f64; 3],
+    /// Elastic principal logarithmic strains after the return.
+    e_e: [f64; 3],
+    /// Principal tangent `d t_a / d e_b` (3 x 3, Pa).
+    d: Matrix3<f64>,
+    /// Shear factor `c = rho_y / rho_tr` when yielding, 1 otherwise.
+    c: f64,
+    yielding: bool,
+}
+
 /// Eigen-decomposition of a plane-strain symmetric tensor (in-plane block
 /// and the zz value): rotation angle of the in-plane eigenvectors and
 /// eigenvalues `[l1, l2, l_zz]`.
@@ -87,9 +100,9 @@ impl Hencky {
         0.5 * lambda * e.sum().powi(2) + mu * e.dot(&e)
     }
 
-    /// Principal return map: Kirchhoff principal stresses, elastic principal
-    /// strains, the 3 x 3 principal tangent `d t / d e`, the shear factor `c`.
-    fn principal(&self, e_tr: [f64; 3]) -> ([f64; 3], [f64; 3], Matrix3<f64>, f64, bool) {
+    /// Principal return map of the trial strains `e_tr` (radial return to
+    /// the von Mises cylinder).
+    fn principal(&self, e_tr: [f64; 3]) -> Principal {
         let (k, mu) = self.moduli();
         let vol = e_tr[0] + e_tr[1] + e_tr[2];
         let dev = e_tr.map(|e| e - vol / 3.0);
@@ -105,11 +118,23 @@ impl Hencky {
                 let tau = [0, 1, 2].map(|a| k * vol + s[a]);
                 let e_e = [0, 1, 2].map(|a| vol / 3.0 + s[a] / (2.0 * mu));
                 let d = one * k + (idev - n * n.transpose()) * (2.0 * mu * c);
-                (tau, e_e, d, c, true)
+                Principal {
+                    tau,
+                    e_e,
+                    d,
+                    c,
+                    yielding: true,
+                }
             }
             _ => {
                 let tau = [0, 1, 2].map(|a| k * vol + s_tr[a]);
-                (tau, e_tr, one * k + idev * (2.0 * mu), 1.0, false)
+                Principal {
+                    tau,
+                    e_e: e_tr,
+                    d: one * k + idev * (2.0 * mu),
+                    c: 1.0,
+                    yielding: false,
+                }
             }
         }
     }
@@ -131,7 +156,13 @@ impl Hencky {
         let b_tr = f3 * b_n * f3.transpose();
         let (q, l) = eig_plane(&b_tr);
         let e_tr = l.map(|v| 0.5 * v.ln());
-        let (tau_p, e_e, dp, c, yielding) = self.principal(e_tr);
+        let Principal {
+            tau: tau_p,
+            e_e,
+            d: dp,
+            c,
+            yielding,
+        } = self.principal(e_tr);
         let (_, mu) = self.moduli();
         let tau = q * Matrix3::from_diagonal(&nalgebra::Vector3::from(tau_p)) * q.transpose();
         let b_e = q * Matrix3::from_diagonal(&nalgebra::Vector3::from(e_e.map(|e| (2.0 * e).exp()))) * q.transpose();
