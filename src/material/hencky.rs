@@ -57,6 +57,7 @@ struct Principal {
     d: Matrix3<f64>,
     /// Shear factor `c = rho_y / rho_tr` when yielding, 1 otherwise.
     c: f64,
+    /// Whether the trial stress lay outside the yield surface.
     yielding: bool,
 }
 
