@@ -302,6 +302,30 @@ region = {{ shape = "rectangle", min = [{x0}, 1.25], max = [{x1}, 1.75] }}"#,
 }
 
 #[test]
+fn a_node_of_zero_lumped_mass_allows_no_explicit_step() {
+    // One point exactly on the grid line x = 2 (lattice placement, h = 1):
+    // the standard basis makes all four nodes of its cell active but
+    // weights the two at x = 3 by exactly 0, so the lumped mass has zeros
+    // on its diagonal. Those unknowns have no inertia, lambda_max(K, M_L)
+    // is unbounded and no explicit step is stable: cond(M_L) is infinite
+    // and the CFL number 0 (G 3.5), as for the singular consistent mass.
+    let body = r#"points_per_cell = 1
+placement = "lattice"
+lattice = [1, 1]
+region = { shape = "rectangle", min = [1.75, 1.25], max = [2.25, 1.75] }"#;
+    let sim = one_cell(1.0, 1.0e3, 2.0, body);
+    assert_eq!(sim.points().x, vec![[2.0, 1.5]]);
+    let c = sim.conditioning().unwrap();
+    println!("{:?}", c.mass_lumped);
+    println!("CFL lumped {:?}, consistent {:?}", c.cfl_lumped, c.cfl_consistent);
+    // Every weight is exact in binary (1/2 and 0): the smallest mass is 0.
+    assert_eq!(c.mass_lumped.lambda_min, 0.0);
+    assert_eq!(c.mass_lumped.value, f64::INFINITY);
+    assert_eq!(c.cfl_lumped, Some(0.0));
+    assert_eq!(c.cfl_consistent, Some(0.0));
+}
+
+#[test]
 fn explicit_ghost_faces_on_populated_cells_are_the_mappings() {
     // The explicit step keeps its own mapping, refilled every step. With
     // `ghost_cells = "populated"` (G 3.1's populated elements: cells that
