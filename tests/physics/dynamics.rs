@@ -603,6 +603,20 @@ velocity_centre = [0.5, 0.5]
 /// gravity `gx` (m/s^2) along x, for `duration` s in `steps` steps, cut
 /// back at most `max_cutbacks` halvings deep.
 fn jelly(name: &str, body: &str, gx: f64, duration: f64, steps: usize, max_cutbacks: usize) -> Simulation {
+    jelly_with_mass(name, body, gx, duration, steps, max_cutbacks, "stabilised")
+}
+
+/// [`jelly`] with the mass matrix `mass` ("consistent", "stabilised",
+/// "lumped").
+fn jelly_with_mass(
+    name: &str,
+    body: &str,
+    gx: f64,
+    duration: f64,
+    steps: usize,
+    max_cutbacks: usize,
+    mass: &str,
+) -> Simulation {
     let text = format!(
         r#"
 [scene]
@@ -626,7 +640,7 @@ gravity = [{gx:?}, 0.0]
 kind = "explicit-dynamics"
 duration = {duration:?}
 load_steps = {steps}
-mass = "stabilised"
+mass = "{mass}"
 stress_update = "usf"
 velocity_update = "flip"
 condition_every = 0
@@ -828,7 +842,10 @@ fn free_fall_kinetic_energy_and_gravity_work_are_closed_forms() {
     // grid and point velocity is k g dt: the points' kinetic energy is
     // M (n g dt)^2 / 2, and the work of gravity, summed each step as
     // f . v_{n+1} dt, is M g^2 dt^2 n (n + 1) / 2 (the rule's first-order
-    // error is then the energy balance, -M g^2 dt^2 n / 2).
+    // error is then the energy balance, -M g^2 dt^2 n / 2). The grid's
+    // kinetic energy v.M v / 2 is the points' too: the masses' entries
+    // (lumped, or consistent with the ghost term) sum to M over a uniform
+    // field.
     let (g, dt, steps) = (2.0, 0.01, 10);
     let block = r#"
 [[body]]
@@ -837,31 +854,35 @@ material = "jelly"
 points_per_cell = 2
 region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
 "#;
-    let mut sim = jelly("free-fall", block, g, dt * steps as f64, steps, 0);
-    let reports = run(&mut sim);
-    let mass = 1000.0 * 0.4 * 0.4;
-    // Round-off: a mass solve (condition below 1e3) per step, summed over
-    // 10 steps: 1e-10 relative leaves a wide margin; the mutant that adds
-    // f dt to v instead of multiplying misses by a factor of order 1.
-    for r in &reports {
-        let (n, dyn_) = (r.step as f64, r.dynamics.as_ref().expect("explicit"));
-        let kinetic = 0.5 * mass * (n * g * dt).powi(2);
-        let work = mass * g * g * dt * dt * n * (n + 1.0) / 2.0;
-        assert!(
-            (r.energy.kinetic - kinetic).abs() < 1e-10 * kinetic,
-            "step {n}: {} vs {kinetic}",
-            r.energy.kinetic
-        );
-        assert!(
-            (r.energy.external_work - work).abs() < 1e-10 * work,
-            "step {n}: {} vs {work}",
-            r.energy.external_work
-        );
-        let balance = -0.5 * mass * g * g * dt * dt * n;
-        assert!(
-            (dyn_.energy_error - balance).abs() < 1e-9 * work,
-            "step {n}: {} vs {balance}",
-            dyn_.energy_error
-        );
+    for mass_matrix in ["stabilised", "lumped"] {
+        let mut sim = jelly_with_mass("free-fall", block, g, dt * steps as f64, steps, 0, mass_matrix);
+        let reports = run(&mut sim);
+        let mass = 1000.0 * 0.4 * 0.4;
+        // Round-off: a mass solve (condition below 1e3) per step, summed
+        // over 10 steps: 1e-10 relative leaves a wide margin; the mutant
+        // that adds f dt to v instead of multiplying misses by a factor of
+        // order 1.
+        for r in &reports {
+            let (n, dyn_) = (r.step as f64, r.dynamics.as_ref().expect("explicit"));
+            let kinetic = 0.5 * mass * (n * g * dt).powi(2);
+            let work = mass * g * g * dt * dt * n * (n + 1.0) / 2.0;
+            for (what, got) in [("points", r.energy.kinetic), ("grid", dyn_.kinetic_grid)] {
+                assert!(
+                    (got - kinetic).abs() < 1e-10 * kinetic,
+                    "{mass_matrix}, step {n}: {what} kinetic energy {got} vs {kinetic}"
+                );
+            }
+            assert!(
+                (r.energy.external_work - work).abs() < 1e-10 * work,
+                "{mass_matrix}, step {n}: {} vs {work}",
+                r.energy.external_work
+            );
+            let balance = -0.5 * mass * g * g * dt * dt * n;
+            assert!(
+                (dyn_.energy_error - balance).abs() < 1e-9 * work,
+                "{mass_matrix}, step {n}: {} vs {balance}",
+                dyn_.energy_error
+            );
+        }
     }
 }
