@@ -595,28 +595,15 @@ velocity_gradient = [[1.0, 0.0], [0.0, 1.0]]
 velocity_centre = [0.5, 0.5]
 "#
     );
-    jelly("flying-ghost", &body, gx, duration, steps, max_cutbacks)
+    jelly("flying-ghost", &body, gx, duration, steps, max_cutbacks, "stabilised")
 }
 
-/// An explicit run (stabilised mass, USF, FLIP) of `body` made of a
-/// 1000 kg/m^3 jelly (E = 1 kPa) on a 3 m x 1 m grid of h = 0.1 m, under
-/// gravity `gx` (m/s^2) along x, for `duration` s in `steps` steps, cut
-/// back at most `max_cutbacks` halvings deep.
-fn jelly(name: &str, body: &str, gx: f64, duration: f64, steps: usize, max_cutbacks: usize) -> Simulation {
-    jelly_with_mass(name, body, gx, duration, steps, max_cutbacks, "stabilised")
-}
-
-/// [`jelly`] with the mass matrix `mass` ("consistent", "stabilised",
-/// "lumped").
-fn jelly_with_mass(
-    name: &str,
-    body: &str,
-    gx: f64,
-    duration: f64,
-    steps: usize,
-    max_cutbacks: usize,
-    mass: &str,
-) -> Simulation {
+/// An explicit run (USF, FLIP, the mass matrix `mass`: "consistent",
+/// "stabilised" or "lumped") of `body` made of a 1000 kg/m^3 jelly
+/// (E = 1 kPa) on a 3 m x 1 m grid of h = 0.1 m, under gravity `gx`
+/// (m/s^2) along x, for `duration` s in `steps` steps, cut back at most
+/// `max_cutbacks` halvings deep.
+fn jelly(name: &str, body: &str, gx: f64, duration: f64, steps: usize, max_cutbacks: usize, mass: &str) -> Simulation {
     let text = format!(
         r#"
 [scene]
@@ -855,7 +842,7 @@ points_per_cell = 2
 region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
 "#;
     for mass_matrix in ["stabilised", "lumped"] {
-        let mut sim = jelly_with_mass("free-fall", block, g, dt * steps as f64, steps, 0, mass_matrix);
+        let mut sim = jelly("free-fall", block, g, dt * steps as f64, steps, 0, mass_matrix);
         let reports = run(&mut sim);
         let mass = 1000.0 * 0.4 * 0.4;
         // Round-off: a mass solve (condition below 1e3) per step, summed
