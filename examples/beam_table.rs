@@ -3,7 +3,7 @@
 //!
 //! `cargo run --release --example beam_table` (about a minute; the output is
 //! in docs/verification.md). The assertions on this problem are in
-//! `tests/physics/finite.rs` (`beam_stability_ghost_completes_where_plain_gimp_fails`,
+//! `engine/tests/physics/finite.rs` (`beam_stability_ghost_completes_where_plain_gimp_fails`,
 //! `beam_tip_follows_the_elastica`); this is the report.
 
 use mpmlab::scene::Scene;

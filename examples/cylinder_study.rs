@@ -22,7 +22,7 @@
 //!   moment, for the cells wholly inside the annulus.
 //!
 //! The output is in docs/verification.md; the assertions are in
-//! `tests/physics/boundary_scenes.rs`.
+//! `engine/tests/physics/boundary_scenes.rs`.
 
 use mpmlab::basis::BasisKind;
 use mpmlab::exact::ExactSolution;

@@ -1,60 +1,24 @@
 //! # mpmlab: the implicit material point method with boundaries that do not follow the grid
 //!
-//! A scene file (TOML) becomes a [`scene::Scene`], is validated into a
-//! [`model::Model`] (grid, materials, bodies filled with material points,
-//! boundary conditions, loads), and a [`simulation::Simulation`] advances it
-//! one load step at a time. Each step:
-//!
-//! 1. map the points to the grid (stencils of the standard or GIMP basis,
-//!    active nodes, dof numbering) — [`assembly::Mapping`];
-//! 2. assemble the reduced stiffness and the out-of-balance force — [`assembly::Pattern`];
-//! 3. factorise (sparse Cholesky, faer) — [`linalg`];
-//! 4. solve for the nodal increments, check the residual;
-//! 5. update point strains, stresses, positions and volumes, forget the grid.
-//!
-//! A step returns a [`simulation::StepReport`] (residuals, timings, energies,
-//! condition number, errors against the exact solution) or a
-//! [`simulation::StepFailure`]. Observers — the terminal UI ([`tui`]), the
-//! rerun recorder ([`record`]), the ParaView series ([`vtk`]) and the tests
-//! — only read reports and state;
-//! the engine modules never import them.
+//! The engine (scenes, models, the step, solvers, checkpoints, the runner)
+//! is the `mpmlab-engine` crate, re-exported here under the same paths
+//! (`mpmlab::scene`, `mpmlab::Simulation`, ...). This crate holds what
+//! follows a run: the terminal UI ([`tui`]), the rerun recorder
+//! ([`record`]), the ParaView series ([`vtk`]), the probes' CSV files
+//! ([`csv`]) and parameter sweeps ([`sweep`]). They only read reports and
+//! state through [`runner::Observer`]; the engine cannot import them (it
+//! does not depend on this crate or its libraries).
 
-pub mod assembly;
-pub mod basis;
-pub mod boundary;
-pub mod bulk;
-pub mod checkpoint;
+pub use mpmlab_engine::{
+    assembly, basis, boundary, bulk, checkpoint, dynamics, exact, field, geometry, ghost, grid, ibm, kinematics,
+    linalg, linear, material, model, points, probe, procfs, quadrature, report, runner, scene, simulation, solver,
+    state, units, verify,
+};
+pub use mpmlab_engine::{Model, Params, Simulation, Snapshot, StepFailure, StepReport};
+
 pub mod colormap;
 pub mod csv;
-pub mod dynamics;
-pub mod exact;
-pub mod field;
-pub mod geometry;
-pub mod ghost;
-pub mod grid;
-pub mod ibm;
-pub mod kinematics;
-pub mod linalg;
-pub mod linear;
-pub mod material;
-pub mod model;
-mod newton;
-pub mod points;
-pub mod probe;
-pub mod procfs;
-pub mod quadrature;
 pub mod record;
-pub mod report;
-pub mod runner;
-pub mod scene;
-pub mod simulation;
-pub mod solver;
-pub mod state;
 pub mod sweep;
 pub mod tui;
-pub mod units;
-pub mod verify;
 pub mod vtk;
-
-pub use model::Model;
-pub use simulation::{Params, Simulation, Snapshot, StepFailure, StepReport};

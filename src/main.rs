@@ -352,6 +352,18 @@ struct Engine {
 }
 
 /// `--threads`: start them, say so (unless `quiet`), or exit 2 naming why not.
+/// A flag set by the first SIGINT or SIGTERM; a second one ends the process
+/// at once with status 130. Handed to [`mpmlab::runner::run`], which cancels
+/// the running step when it is set.
+fn stop_on_signals() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        let _ = signal_hook::flag::register_conditional_shutdown(sig, 130, flag.clone());
+        let _ = signal_hook::flag::register(sig, flag.clone());
+    }
+    flag
+}
+
 fn use_threads(sim: &mut Simulation, threads: Option<usize>, quiet: bool) -> Result<(), ExitCode> {
     let Some(n) = threads else { return Ok(()) };
     match sim.set_threads(n) {
@@ -834,7 +846,7 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     };
     // Ctrl-C or SIGTERM: cancel the running step, keep the last good state
     // and close the recording; a second one ends the process at once.
-    let stop = mpmlab::runner::stop_on_signals();
+    let stop = stop_on_signals();
     let mut detached = Vec::new();
     let end = mpmlab::runner::run(
         &mut sim,
@@ -1314,7 +1326,7 @@ fn verify(a: &VerifyArgs) -> Result<ExitCode> {
         eprintln!("error: --write-docs needs the full set (without --quick)");
         return Ok(ExitCode::from(2));
     }
-    let stop = mpmlab::runner::stop_on_signals();
+    let stop = stop_on_signals();
     let verify::Verified { rows, tables } = verify::verify(&a.scenes, a.quick, &stop, &mut |line| eprintln!("{line}"));
     if stop.load(std::sync::atomic::Ordering::Relaxed) {
         eprintln!("interrupted");

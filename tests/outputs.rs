@@ -84,7 +84,7 @@ fn platen_probe_carries_the_paper_stress() {
         let along = f[0] * n[0] + f[1] * n[1];
         let across = f[0] * n[1] - f[1] * n[0];
         // The paper prints 4 digits (13.46); the method reproduces the
-        // stress to round-off (tests/physics/ibm.rs), so the reaction matches to
+        // stress to round-off (engine/tests/physics/ibm.rs), so the reaction matches to
         // the paper's rounding, 0.005/13.46 = 4e-4.
         assert!(
             (along / 100.0 - 13.46).abs() < 0.005 * 1.01,

@@ -50,7 +50,7 @@ fn small_sweep_table_rates_restart_and_charts() {
         "{header}"
     );
     // Values: the G (31) error of the confined column is exactly h/(4H)
-    // (tests/physics/column.rs): 2.5e-2, 1.25e-2, 6.25e-3 for H = 10 m.
+    // (engine/tests/physics/column.rs): 2.5e-2, 1.25e-2, 6.25e-3 for H = 10 m.
     for (r, e) in rows.iter().zip([2.5e-2, 1.25e-2, 6.25e-3]) {
         assert!(r.completed && r.failure.is_empty(), "{r:?}");
         assert!((error(r, "syy_normalised") / e - 1.0).abs() < 1e-9, "{r:?}");

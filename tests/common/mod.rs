@@ -1,42 +1,14 @@
-//! Helpers shared by the integration tests (included with `mod common;`).
+//! Helpers shared by the front end's integration tests (included with
+//! `mod common;`): the engine's scene helpers, temporary paths, the binary
+//! and recordings.
 #![allow(dead_code)]
 
-use mpmlab::scene::Scene;
-use mpmlab::{Model, Simulation, StepReport};
 use std::path::{Path, PathBuf};
 
-/// Path of a shipped scene.
-pub fn scene_path(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("scenarios")
-        .join(format!("{name}.toml"))
-}
-
-/// Parse a shipped scene, let `edit` change it, build and return the simulation.
-pub fn sim_with(name: &str, edit: impl FnOnce(&mut Scene)) -> Simulation {
-    let path = scene_path(name);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let mut scene = Scene::parse(&text, name).unwrap();
-    edit(&mut scene);
-    Simulation::new(Model::build(&scene, &text, name).unwrap())
-}
-
-/// Run every load step, panicking on failure.
-pub fn run_all(sim: &mut Simulation) -> StepReport {
-    let mut last = None;
-    while !sim.finished() {
-        last = Some(sim.step().unwrap_or_else(|f| panic!("{f}")));
-    }
-    last.unwrap()
-}
-
-pub fn error(r: &StepReport, name: &str) -> f64 {
-    r.errors
-        .iter()
-        .find(|e| e.name == name)
-        .unwrap_or_else(|| panic!("no error `{name}`"))
-        .value
-}
+#[path = "../../engine/tests/common/mod.rs"]
+mod engine;
+#[allow(unused_imports)]
+pub use engine::*;
 
 /// A unique temporary path (a file or a folder; not created here).
 pub fn temp_path(stem: &str, ext: &str) -> TempPath {

@@ -3,9 +3,9 @@
 
 use crate::common;
 use common::{run_all, sim_with};
-use mpmlab::linalg::ConditionMethod;
-use mpmlab::scene::ConditionMode;
-use mpmlab::{Params, StepFailure};
+use mpmlab_engine::linalg::ConditionMethod;
+use mpmlab_engine::scene::ConditionMode;
+use mpmlab_engine::{Params, StepFailure};
 
 #[test]
 fn work_equals_strain_energy_in_a_linear_step() {
@@ -69,7 +69,7 @@ fn work_is_strain_energy_plus_the_ghost_penalty() {
         let last = run_all(&mut sim).energy;
         (first, last)
     };
-    let rest = |e: &mpmlab::report::Energy| (e.external_work - e.strain - e.ghost) / e.external_work;
+    let rest = |e: &mpmlab_engine::report::Energy| (e.external_work - e.strain - e.ghost) / e.external_work;
     let e = 12.0e6;
     let (first, last) = run(e, 50);
     assert!(first.ghost > 0.0 && last.ghost > first.ghost, "{first:?} {last:?}");
@@ -158,7 +158,7 @@ fn tolerance_is_enforced() {
 
 #[test]
 fn progress_streams_residuals_and_can_cancel_a_step() {
-    use mpmlab::simulation::{Progress, StepFailure};
+    use mpmlab_engine::simulation::{Progress, StepFailure};
     use std::sync::{Arc, Mutex};
     // The finite-deformation beam: every Newton residual reaches the hook;
     // returning false at the second one cancels the step, leaving step 0.
@@ -186,7 +186,7 @@ fn progress_streams_residuals_and_can_cancel_a_step() {
 
 #[test]
 fn a_panic_inside_a_step_is_a_failure_value_and_the_state_survives() {
-    use mpmlab::simulation::Progress;
+    use mpmlab_engine::simulation::Progress;
     // An observer that panics stands in for a bug anywhere inside the step:
     // step_guarded turns it into StepFailure::Internal, and since a step
     // commits only at its end the state stays at step 0.
@@ -214,9 +214,9 @@ fn a_panic_inside_a_step_is_a_failure_value_and_the_state_survives() {
 /// The 2D five-point Laplacian on an `m x m` grid shifted by `sigma`,
 /// lower triangle: eigenvalues `4 - 2 cos(i pi/(m+1)) - 2 cos(j pi/(m+1)) -
 /// sigma`, `i, j = 1..m`.
-fn shifted_laplacian(m: usize, sigma: f64) -> (faer::sparse::SparseColMat<mpmlab::linalg::Ix, f64>, usize) {
+fn shifted_laplacian(m: usize, sigma: f64) -> (faer::sparse::SparseColMat<mpmlab_engine::linalg::Ix, f64>, usize) {
     use faer::sparse::{SparseColMat, Triplet};
-    let id = |i: usize, j: usize| (i * m + j) as mpmlab::linalg::Ix;
+    let id = |i: usize, j: usize| (i * m + j) as mpmlab_engine::linalg::Ix;
     let mut t = Vec::new();
     for i in 0..m {
         for j in 0..m {
@@ -240,7 +240,7 @@ fn shifted_laplacian(m: usize, sigma: f64) -> (faer::sparse::SparseColMat<mpmlab
 
 #[test]
 fn symmetric_indefinite_factor_counts_negative_eigenvalues() {
-    use mpmlab::solver::{FactorKind, Factorisation, Symbolic, Symmetry};
+    use mpmlab_engine::solver::{FactorKind, Factorisation, Symbolic, Symmetry};
     // Sylvester's law of inertia: the L D L^T pivots have as many negative
     // entries as the matrix has negative eigenvalues. Small grids take
     // faer's simplicial path, large ones the supernodal one; shifts chosen
@@ -259,7 +259,7 @@ fn symmetric_indefinite_factor_counts_negative_eigenvalues() {
         // The solve is accurate: x = A^-1 (A x0) recovers x0 to the
         // condition number (at most ~1e3 for these shifts) times eps.
         let x0: Vec<f64> = (0..m * m).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
-        let b = mpmlab::linalg::sym_lower_mul(a.as_ref(), &x0);
+        let b = mpmlab_engine::linalg::sym_lower_mul(a.as_ref(), &x0);
         let x = f.solve(&b).unwrap();
         let err = x.iter().zip(&x0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-9, "m = {m}, sigma = {sigma}: {err:e}");
@@ -292,8 +292,8 @@ fn a_released_mapping_is_restored_to_the_same_stencils_and_groups() {
     // is built and rebuilds them for the update: the rebuilt ones must be
     // the mapping's own, bit for bit, or the update would move the points
     // with other weights than the stiffness was assembled with.
-    use mpmlab::assembly::Mapping;
-    use mpmlab::basis::BasisKind;
+    use mpmlab_engine::assembly::Mapping;
+    use mpmlab_engine::basis::BasisKind;
     for basis in [BasisKind::Standard, BasisKind::Gimp] {
         let sim = sim_with("translating-domain", |s| s.bodies[0].basis = basis);
         let m = sim.model();

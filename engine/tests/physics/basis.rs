@@ -1,8 +1,8 @@
 //! Partition of unity and gradient sums of both bases, and finite-difference
 //! checks of the GIMP gradients, at random points.
 
-use mpmlab::basis::{stencil, BasisKind};
-use mpmlab::grid::Grid;
+use mpmlab_engine::basis::{stencil, BasisKind};
+use mpmlab_engine::grid::Grid;
 use proptest::prelude::*;
 
 fn grid(h: f64, ox: f64, oy: f64) -> Grid {
@@ -64,7 +64,7 @@ proptest! {
             let sp = stencil(&g, BasisKind::Gimp, xp, lp);
             let sm = stencil(&g, BasisKind::Gimp, xm, lp);
             for k in 0..s.len() {
-                let w = |st: mpmlab::basis::StencilView| (0..st.len()).find(|&j| st.node(j) == s.node(k)).map_or(0.0, |j| st.w(j));
+                let w = |st: mpmlab_engine::basis::StencilView| (0..st.len()).find(|&j| st.node(j) == s.node(k)).map_or(0.0, |j| st.w(j));
                 let fd = (w(sp.view()) - w(sm.view())) / (2.0 * eps);
                 // GIMP weights are C1 with second derivatives <= 1/(h l): the
                 // central difference error is O(eps^2 / (h l)) + round-off 1e-16/eps.

@@ -2,7 +2,7 @@
 //! finite differences, elastic and plastic, with distinct and repeated
 //! principal stretches; the return map lands on the yield surface.
 
-use mpmlab::material::hencky::{right_stretch, Hencky};
+use mpmlab_engine::material::hencky::{right_stretch, Hencky};
 use nalgebra::{Matrix2, Matrix3};
 
 fn check_tangent(m: &Hencky, df: Matrix2<f64>, bn: Matrix3<f64>) -> f64 {

@@ -4,9 +4,9 @@
 
 use crate::common;
 use common::{error, run_all, sim_with};
-use mpmlab::exact::ExactSolution;
-use mpmlab::scene::Placement;
-use mpmlab::Simulation;
+use mpmlab_engine::exact::ExactSolution;
+use mpmlab_engine::scene::Placement;
+use mpmlab_engine::Simulation;
 
 #[test]
 fn square_traction_aligned_is_exact() {
@@ -247,7 +247,7 @@ fn plate_hole_clipped_keeps_the_stress_rate_at_4x4_points() {
 
 /// Mid-tip downward deflection of the cantilever scene with grid size `h`,
 /// a lattice of points, `pressure` (Pa) over `steps` load steps.
-fn cantilever_tip(h: f64, lattice: [usize; 2], pressure: f64, steps: usize) -> Result<f64, mpmlab::StepFailure> {
+fn cantilever_tip(h: f64, lattice: [usize; 2], pressure: f64, steps: usize) -> Result<f64, mpmlab_engine::StepFailure> {
     cantilever_tip_with(h, lattice, pressure, steps, 0.0)
 }
 
@@ -258,7 +258,7 @@ fn cantilever_tip_with(
     pressure: f64,
     steps: usize,
     gamma_k: f64,
-) -> Result<f64, mpmlab::StepFailure> {
+) -> Result<f64, mpmlab_engine::StepFailure> {
     let mut sim = sim_with("cantilever-follower-pressure", |s| {
         s.analysis.gamma_k = gamma_k;
         s.grid.h = h;
@@ -267,7 +267,7 @@ fn cantilever_tip_with(
         s.grid.size = [11.0 * 1.5, 1.5 * (6.0 / 1.5 + 1.0) + 3.0];
         s.dirichlet[1].node = Some([0.0, 1.75]);
         s.bodies[0].lattice = Some(lattice);
-        s.boundaries[0].traction = Some(mpmlab::scene::TractionSpec::Pressure { value: pressure });
+        s.boundaries[0].traction = Some(mpmlab_engine::scene::TractionSpec::Pressure { value: pressure });
         s.analysis.load_steps = steps;
     });
     while !sim.finished() {
@@ -302,7 +302,8 @@ fn cantilever_3000_pa_variant() {
     // positive definiteness (singular, or so ill-conditioned that the
     // residual stalls): the failure must be reported, not panic.
     match cantilever_tip(0.75, [28, 8], 3000.0, 10) {
-        Err(mpmlab::StepFailure::Singular { step, .. }) | Err(mpmlab::StepFailure::NotConverged { step, .. }) => {
+        Err(mpmlab_engine::StepFailure::Singular { step, .. })
+        | Err(mpmlab_engine::StepFailure::NotConverged { step, .. }) => {
             assert!(step > 1 && step <= 10)
         }
         other => panic!("expected a reported failure, got {other:?}"),

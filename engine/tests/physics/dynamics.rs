@@ -3,12 +3,12 @@
 
 use crate::common;
 use common::{error, sim_with};
-use mpmlab::scene::{MassKind, RegionSpec, StressUpdate, VelocityUpdate};
-use mpmlab::simulation::StepFailure;
-use mpmlab::Simulation;
+use mpmlab_engine::scene::{MassKind, RegionSpec, StressUpdate, VelocityUpdate};
+use mpmlab_engine::simulation::StepFailure;
+use mpmlab_engine::Simulation;
 
 /// Every step's report of a run to the end (panics on failure).
-fn run(sim: &mut Simulation) -> Vec<mpmlab::StepReport> {
+fn run(sim: &mut Simulation) -> Vec<mpmlab_engine::StepReport> {
     let mut out = Vec::new();
     while !sim.finished() {
         out.push(sim.step().unwrap_or_else(|f| panic!("{f}")));
@@ -157,7 +157,10 @@ fn translating_domain_mass_conditioning() {
     // the CFL number hardly depends on the position.
     println!("| basis | a/h | cond M | cond M~ | cond M lumped | cond K | cond K~ | CFL M | CFL M~ |");
     println!("|---|---|---|---|---|---|---|---|---|");
-    for basis in [mpmlab::basis::BasisKind::Standard, mpmlab::basis::BasisKind::Gimp] {
+    for basis in [
+        mpmlab_engine::basis::BasisKind::Standard,
+        mpmlab_engine::basis::BasisKind::Gimp,
+    ] {
         // sMPM: a point exactly on a grid line gives a node of zero weight
         // (a degenerate, exactly singular matrix); sample around those
         // positions instead (the lattice's points lie on lines at a/h =
@@ -165,7 +168,9 @@ fn translating_domain_mass_conditioning() {
         // domain barely enters a new cell.
         let mut positions: Vec<f64> = (0..=200)
             .map(|k| k as f64 / 100.0)
-            .filter(|a| basis == mpmlab::basis::BasisKind::Gimp || (a * 4.0).fract() != 0.0 || (a * 2.0).fract() == 0.0)
+            .filter(|a| {
+                basis == mpmlab_engine::basis::BasisKind::Gimp || (a * 4.0).fract() != 0.0 || (a * 2.0).fract() == 0.0
+            })
             .collect();
         positions.extend([1e-3, 1e-5, 1e-7, 1.0 + 1e-3, 1.0 + 1e-5, 1.0 + 1e-7]);
         positions.extend([0.25 + 1e-3, 0.25 + 1e-5, 0.25 + 1e-7, 1.25 + 1e-7]);
@@ -331,9 +336,9 @@ fn explicit_ghost_faces_on_populated_cells_are_the_mappings() {
     // `ghost_cells = "populated"` (G 3.1's populated elements: cells that
     // hold a point) its ghost faces must be those the step-independent
     // mapping gives at the same positions.
-    use mpmlab::assembly::Mapping;
-    use mpmlab::ghost;
-    use mpmlab::scene::GhostCells;
+    use mpmlab_engine::assembly::Mapping;
+    use mpmlab_engine::ghost;
+    use mpmlab_engine::scene::GhostCells;
     // The standard basis: with GIMP and populated cells, this scene's
     // stabilised mass is singular at the second step ("a node is held by
     // almost no mass"). A boundary's tracking points (no volume, no mass)
@@ -342,12 +347,12 @@ fn explicit_ghost_faces_on_populated_cells_are_the_mappings() {
     let text = std::fs::read_to_string(common::scene_path("ghost-collision-elastic")).unwrap()
         + "[[boundary]]\nname = \"probe\"\nbody = \"lower-left\"\n\
            points = [[0.45, 0.25], [0.46, 0.25], [0.47, 0.26]]\nmaterial_side = \"left\"\n";
-    let mut scene = mpmlab::scene::Scene::parse(&text, "tracked").unwrap();
+    let mut scene = mpmlab_engine::scene::Scene::parse(&text, "tracked").unwrap();
     scene.analysis.ghost_cells = GhostCells::Populated;
     for b in &mut scene.bodies {
-        b.basis = mpmlab::basis::BasisKind::Standard;
+        b.basis = mpmlab_engine::basis::BasisKind::Standard;
     }
-    let mut sim = Simulation::new(mpmlab::Model::build(&scene, &text, "tracked").unwrap());
+    let mut sim = Simulation::new(mpmlab_engine::Model::build(&scene, &text, "tracked").unwrap());
     let probe = sim.model().grid.cell_of([0.45, 0.25]).unwrap();
     for _ in 0..3 {
         let m = sim.model();
@@ -367,7 +372,7 @@ fn explicit_ghost_faces_on_populated_cells_are_the_mappings() {
 }
 
 /// `(1/(nt W0)) sum_i |W_kin,i + W_eps,i - W0|` (G 5.2).
-fn mean_energy_error(reports: &[mpmlab::StepReport]) -> f64 {
+fn mean_energy_error(reports: &[mpmlab_engine::StepReport]) -> f64 {
     let w0 = reports[0].dynamics.as_ref().unwrap().initial_energy;
     reports
         .iter()
@@ -376,7 +381,12 @@ fn mean_energy_error(reports: &[mpmlab::StepReport]) -> f64 {
         / (reports.len() as f64 * w0)
 }
 
-fn collision(steps: usize, mass: MassKind, update: StressUpdate, gamma_m: Option<f64>) -> Vec<mpmlab::StepReport> {
+fn collision(
+    steps: usize,
+    mass: MassKind,
+    update: StressUpdate,
+    gamma_m: Option<f64>,
+) -> Vec<mpmlab_engine::StepReport> {
     let mut sim = sim_with("ghost-collision-elastic", |s| {
         s.analysis.load_steps = steps;
         s.analysis.mass = mass;
@@ -496,7 +506,7 @@ fn populated_cells_leave_domain_only_nodes_unheld() {
     // (the default) the same steps run with cond(M~) ~ 1e2.
     let steps = 20;
     let mut populated = sim_with("translating-ghost", |s| {
-        s.analysis.ghost_cells = mpmlab::scene::GhostCells::Populated;
+        s.analysis.ghost_cells = mpmlab_engine::scene::GhostCells::Populated;
         s.analysis.condition_every = 0;
     });
     let failure = (0..steps).find_map(|_| populated.step().err());
@@ -515,7 +525,7 @@ fn explicit_scenes_need_density_and_free_motion_exact_solutions() {
     let path = common::scene_path("ghost-collision-elastic");
     let text = std::fs::read_to_string(&path).unwrap();
     let build = |t: &str| {
-        mpmlab::Model::from_text(t, "x.toml")
+        mpmlab_engine::Model::from_text(t, "x.toml")
             .map(|_| ())
             .map_err(|e| e.to_string())
     };
@@ -557,7 +567,7 @@ fn threads_give_the_serial_run_to_the_bit() {
     }
     let (a, b) = (serial.points(), threaded.points());
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    let flat = |p: &mpmlab::points::Points| {
+    let flat = |p: &mpmlab_engine::points::Points| {
         let mut v = Vec::new();
         v.extend(p.x.iter().flatten());
         v.extend(p.v.iter().flatten());
@@ -634,7 +644,7 @@ condition_every = 0
 max_cutbacks = {max_cutbacks}
 "#
     );
-    Simulation::new(mpmlab::Model::from_text(&text, &format!("{name}.toml")).unwrap_or_else(|e| panic!("{e}")))
+    Simulation::new(mpmlab_engine::Model::from_text(&text, &format!("{name}.toml")).unwrap_or_else(|e| panic!("{e}")))
 }
 
 /// Every field a step updates, per point, as bits: equal vectors are the
@@ -726,7 +736,7 @@ fn a_time_step_moving_points_past_a_cell_is_cut_back() {
         dx.fold(0.0, f64::max)
     );
     let (rc, rf) = (reports.last().unwrap(), fine_reports.last().unwrap());
-    let w = |r: &mpmlab::StepReport| r.energy.kinetic + r.energy.strain;
+    let w = |r: &mpmlab_engine::StepReport| r.energy.kinetic + r.energy.strain;
     assert!(close(w(rc), w(rf), w(rf)), "{} vs {}", w(rc), w(rf));
     assert_eq!(rc.dynamics.as_ref().unwrap().time, rf.dynamics.as_ref().unwrap().time);
 }

@@ -2,9 +2,9 @@
 //! applied to the displacement gradient (central differences), and the
 //! boundary conditions hold.
 
-use mpmlab::exact::ExactSolution;
-use mpmlab::material::{mul3, LinearElastic};
-use mpmlab::scene::Plane;
+use mpmlab_engine::exact::ExactSolution;
+use mpmlab_engine::material::{mul3, LinearElastic};
+use mpmlab_engine::scene::Plane;
 
 fn check_hooke(e: &ExactSolution, m: &LinearElastic, points: &[[f64; 2]]) {
     let d = m.d_matrix();

@@ -2,10 +2,10 @@
 //! runs and corners, convergence to a circle, Gauss integration along
 //! pieces, and splitting at grid lines.
 
-use mpmlab::boundary::bspline::{BSpline, Interpolation};
-use mpmlab::boundary::intersect::split;
-use mpmlab::grid::Grid;
-use mpmlab::quadrature::gauss_legendre;
+use mpmlab_engine::boundary::bspline::{BSpline, Interpolation};
+use mpmlab_engine::boundary::intersect::split;
+use mpmlab_engine::grid::Grid;
+use mpmlab_engine::quadrature::gauss_legendre;
 use proptest::prelude::*;
 
 fn close(a: [f64; 2], b: [f64; 2], tol: f64) -> bool {

@@ -15,15 +15,15 @@
 //! - the Hencky / von Mises return map against closed-form pure shear and
 //!   uniaxial strain.
 
-use mpmlab::assembly::Mapping;
-use mpmlab::boundary::bspline::BSpline;
-use mpmlab::boundary::{traction_forces, Boundary, Traction};
-use mpmlab::ghost::{self, GhostCells, GhostFace};
-use mpmlab::grid::Grid;
-use mpmlab::ibm::dirichlet_function;
-use mpmlab::material::hencky::Hencky;
-use mpmlab::scene::MassKind;
-use mpmlab::Simulation;
+use mpmlab_engine::assembly::Mapping;
+use mpmlab_engine::boundary::bspline::BSpline;
+use mpmlab_engine::boundary::{traction_forces, Boundary, Traction};
+use mpmlab_engine::ghost::{self, GhostCells, GhostFace};
+use mpmlab_engine::grid::Grid;
+use mpmlab_engine::ibm::dirichlet_function;
+use mpmlab_engine::material::hencky::Hencky;
+use mpmlab_engine::scene::MassKind;
+use mpmlab_engine::Simulation;
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3};
 use std::collections::BTreeMap;
 
@@ -36,11 +36,11 @@ fn sim(text: &str) -> Simulation {
 /// exact field.
 fn polyline(
     name: &str,
-    kind: mpmlab::scene::DirichletKind,
+    kind: mpmlab_engine::scene::DirichletKind,
     points: Vec<[f64; 2]>,
     side: f64,
-) -> mpmlab::ibm::IbmBoundary {
-    mpmlab::ibm::IbmBoundary {
+) -> mpmlab_engine::ibm::IbmBoundary {
+    mpmlab_engine::ibm::IbmBoundary {
         name: name.into(),
         kind,
         points,
@@ -458,8 +458,8 @@ fn dirichlet_matrix_of_fixed_and_roller_boundaries_is_c_section_3() {
     // to its lower right), at points inside both bands, inside one, beyond
     // them and outside the material; beyond a polyline's ends a boundary
     // does not act (D = I).
-    use mpmlab::ibm::{d_total, in_band};
-    use mpmlab::scene::DirichletKind;
+    use mpmlab_engine::ibm::{d_total, in_band};
+    use mpmlab_engine::scene::DirichletKind;
     let delta = 0.5;
     let th = 60f64.to_radians();
     let t2 = [th.cos(), th.sin()];
@@ -566,7 +566,7 @@ fn band_quadrature_integrates_the_strip_along_an_inclined_boundary() {
     // int s = L^2 delta / 2, int phi = L delta^2 / 2, int phi^2 = L delta^3 / 3,
     // int s phi = L^2 delta^2 / 4, for a polyline of two inclined segments
     // crossing several cells, with the material on either side.
-    use mpmlab::scene::DirichletKind;
+    use mpmlab_engine::scene::DirichletKind;
     let grid = Grid {
         origin: [-0.5, 0.25],
         h: 0.5,
@@ -734,8 +734,8 @@ fn band_integral_is_c18_for_any_width() {
     // r = delta/h, symmetric mode u_y = d_0 below, d_1 above, u_x = 0):
     //   E [[4/(3r) - 5/3 + 17r/15, 5/6 - 17r/15], [., 17r/15]].
     // Here delta/h = 0.5 is open to the test (no point is involved).
-    use mpmlab::ibm::{b_bar, d_total, grid_stencil};
-    use mpmlab::scene::DirichletKind;
+    use mpmlab_engine::ibm::{b_bar, d_total, grid_stencil};
+    use mpmlab_engine::scene::DirichletKind;
     let (h, e) = (2.0, 1.0e6);
     let grid = Grid {
         origin: [0.0, 0.0],
@@ -807,10 +807,10 @@ fn band_deformation_gradient_is_the_derivative_of_the_motion() {
     // roller boundary inclined at 30 degrees and at a corner of two, for
     // the standard basis and GIMP, at delta/h = 0.25 and 0.5 (where D is
     // far from 1).
-    use mpmlab::basis::{stencil, BasisKind};
-    use mpmlab::bulk::band_gradient;
-    use mpmlab::ibm::{in_band, IbmStep};
-    use mpmlab::scene::DirichletKind;
+    use mpmlab_engine::basis::{stencil, BasisKind};
+    use mpmlab_engine::bulk::band_gradient;
+    use mpmlab_engine::ibm::{in_band, IbmStep};
+    use mpmlab_engine::scene::DirichletKind;
     let h = 0.5;
     let grid = Grid {
         origin: [-2.0, -2.0],
@@ -1213,7 +1213,7 @@ fn roller_constraint_weights_are_exact_line_integrals() {
     // written out here). Along a straight piece inside a cell N_n is
     // quadratic, so the engine's 3 Gauss points per piece are exact; the
     // midpoint rule's error is below 1e-8 of the weights here.
-    use mpmlab::scene::DirichletKind;
+    use mpmlab_engine::scene::DirichletKind;
     let grid = Grid {
         origin: [-0.5, 0.25],
         h: 0.5,

@@ -3,7 +3,7 @@
 //! observers, and the loop to the end with cancellation.
 //!
 //! Observers only read: the table printer, the recorder
-//! ([`crate::record::Recorder`] implements [`Observer`]) and the TUI's
+//! (the `mpmlab` crate's recorder implements [`Observer`]) and the TUI's
 //! update channel. An observer that can no longer follow (a full disk
 //! under the recorder) says why and detaches itself; the run goes on.
 
@@ -128,15 +128,4 @@ pub fn run(
     sim.set_progress(None);
     sim.set_cancel(None);
     end
-}
-
-/// A flag set by the first SIGINT or SIGTERM; a second one ends the process
-/// at once with status 130.
-pub fn stop_on_signals() -> Arc<AtomicBool> {
-    let flag = Arc::new(AtomicBool::new(false));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        let _ = signal_hook::flag::register_conditional_shutdown(sig, 130, flag.clone());
-        let _ = signal_hook::flag::register(sig, flag.clone());
-    }
-    flag
 }

@@ -3,7 +3,7 @@
 
 use crate::common;
 use common::{error, run_all, sim_with};
-use mpmlab::basis::BasisKind;
+use mpmlab_engine::basis::BasisKind;
 
 fn errors(basis: BasisKind, h: f64) -> (f64, f64) {
     let mut sim = sim_with("column-small-strain", |s| {

@@ -4,11 +4,11 @@
 
 use crate::common;
 use common::{error, run_all, sim_with};
-use mpmlab::StepReport;
+use mpmlab_engine::StepReport;
 use proptest::prelude::*;
 
 /// Stresses of every point rotated into the block frame (angle in degrees).
-fn block_frame_stress(sim: &mpmlab::Simulation, angle: f64) -> Vec<[f64; 3]> {
+fn block_frame_stress(sim: &mpmlab_engine::Simulation, angle: f64) -> Vec<[f64; 3]> {
     let (s, c) = angle.to_radians().sin_cos();
     sim.points()
         .stress
@@ -25,7 +25,7 @@ fn block_frame_stress(sim: &mpmlab::Simulation, angle: f64) -> Vec<[f64; 3]> {
         .collect()
 }
 
-fn block(angle: u32, delta_over_h: f64) -> (mpmlab::Simulation, StepReport) {
+fn block(angle: u32, delta_over_h: f64) -> (mpmlab_engine::Simulation, StepReport) {
     let mut sim = sim_with(&format!("block-roller-{angle}"), |s| {
         s.analysis.delta_over_h = delta_over_h;
         // Let the sweep reach the bands where round-off dominates (the
@@ -119,7 +119,7 @@ fn delta_trade_off() {
 
 /// C 5.1's confined block turned by `angle` degrees about (80, 80), every
 /// side an implicit roller, delta = 1e-7 h, Ghost stiffness `gamma_k`.
-fn confined_block(angle: f64, gamma_k: f64) -> mpmlab::Simulation {
+fn confined_block(angle: f64, gamma_k: f64) -> mpmlab_engine::Simulation {
     sim_with("block-roller-30", |s| {
         s.analysis.delta_over_h = 1e-7;
         s.analysis.gamma_k = gamma_k;
@@ -140,15 +140,15 @@ fn confined_block(angle: f64, gamma_k: f64) -> mpmlab::Simulation {
         s.ibm[1].points = vec![d, a];
         s.ibm[2].points = vec![b, cc];
         s.ibm[3].points = vec![cc, d];
-        s.bodies[0].region = mpmlab::scene::RegionSpec::Rotated {
+        s.bodies[0].region = mpmlab_engine::scene::RegionSpec::Rotated {
             angle_deg: angle,
             about: [80.0, 80.0],
-            region: Box::new(mpmlab::scene::RegionSpec::Rectangle {
+            region: Box::new(mpmlab_engine::scene::RegionSpec::Rectangle {
                 min: [30.0, 30.0],
                 max: [130.0, 130.0],
             }),
         };
-        if let Some(mpmlab::scene::ExactSpec::ConfinedY { angle_deg, .. }) = s.exact.as_mut() {
+        if let Some(mpmlab_engine::scene::ExactSpec::ConfinedY { angle_deg, .. }) = s.exact.as_mut() {
             *angle_deg = angle;
         }
     })
@@ -243,7 +243,7 @@ proptest! {
 /// bilinear FE solve on the same grid (2x2 Gauss points, nodes on x = 0
 /// fixed on the grid).
 fn deep_beam_a(n: usize, h: f64, fe: bool) -> f64 {
-    let mut sim = sim_with("deep-beam-self-weight", mpmlab::verify::deep_beam(h, n, fe));
+    let mut sim = sim_with("deep-beam-self-weight", mpmlab_engine::verify::deep_beam(h, n, fe));
     run_all(&mut sim);
     let b = &sim.model().boundaries[0];
     sim.points().displacement(b.points[2])[1]
@@ -323,9 +323,9 @@ fn plate_hole_symmetry_rollers_by_ibm() {
             if ibm {
                 s.dirichlet.clear();
                 for (name, pts) in [("x0", [[0.0, 1.5], [0.0, 0.5]]), ("y0", [[0.5, 0.0], [1.5, 0.0]])] {
-                    s.ibm.push(mpmlab::scene::IbmSpec {
+                    s.ibm.push(mpmlab_engine::scene::IbmSpec {
                         name: name.into(),
-                        kind: mpmlab::scene::DirichletKind::Roller,
+                        kind: mpmlab_engine::scene::DirichletKind::Roller,
                         points: pts.to_vec(),
                         displacement: None,
                         exact_field: false,
@@ -356,10 +356,10 @@ fn plate_hole_symmetry_rollers_by_ibm() {
 /// Transverse tip displacement (beam frame) after each load step of the
 /// cantilever scene `name` turned by `angle`, at grid size `h`, with
 /// `edit` applied to the scene.
-fn tip_curve(name: &str, angle: u32, h: f64, edit: impl FnOnce(&mut mpmlab::scene::Scene)) -> Vec<f64> {
+fn tip_curve(name: &str, angle: u32, h: f64, edit: impl FnOnce(&mut mpmlab_engine::scene::Scene)) -> Vec<f64> {
     let mut sim = sim_with(name, |s| {
         s.grid.h = h;
-        s.analysis.condition = mpmlab::scene::ConditionMode::Off;
+        s.analysis.condition = mpmlab_engine::scene::ConditionMode::Off;
         edit(s);
     });
     let (sn, c) = (angle as f64).to_radians().sin_cos();
@@ -403,7 +403,7 @@ fn simple_shear_is_exact_for_every_offset() {
     // field; the square slides across two cells. C: error < 2e-8 for every
     // offset, including next to cell edges.
     for a in [0.0, 1e-3, 10.0, 25.0, 50.0, 75.0, 99.0, 99.999, 100.0] {
-        let mut sim = sim_with("simple-shear-sweep", mpmlab::verify::simple_shear(a));
+        let mut sim = sim_with("simple-shear-sweep", mpmlab_engine::verify::simple_shear(a));
         let r = run_all(&mut sim);
         let (es, eu) = (error(&r, "stress_l2"), error(&r, "displacement_l2"));
         println!("offset {a}: stress {es:.3e}, displacement {eu:.3e}");
@@ -453,7 +453,10 @@ fn rigid_footing_is_pushed_in_without_points_crossing_it() {
             Err(f) => break f,
         }
     };
-    assert!(matches!(failed, mpmlab::StepFailure::Singular { .. }), "{failed:?}");
+    assert!(
+        matches!(failed, mpmlab_engine::StepFailure::Singular { .. }),
+        "{failed:?}"
+    );
 }
 
 #[test]
@@ -486,7 +489,7 @@ fn plate_hole_dirichlet_converges() {
     // The plain fit (fit_regularisation = 0) fails, with a clear report,
     // once nodes barely touch the curve.
     match run(0.0625, Some(0.0)) {
-        Err(mpmlab::StepFailure::Singular { reason, .. }) => {
+        Err(mpmlab_engine::StepFailure::Singular { reason, .. }) => {
             assert!(
                 reason.contains("least-squares fit")
                     && reason.contains("barely touches")
@@ -534,7 +537,7 @@ fn plate_hole_dirichlet_converges() {
 
 #[test]
 fn shared_node_reactions_split_along_the_constraints() {
-    use mpmlab::ibm::split_reaction;
+    use mpmlab_engine::ibm::split_reaction;
     let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12;
     // Two rollers at a 30 deg corner: r = 3 n1 + 2 n2 decomposes along the
     // normals whatever the weights.
@@ -693,10 +696,12 @@ fn a_straight_roller_with_a_normal_displacement_can_move() {
     }
     // A polyline roller cannot: its normal is not one direction.
     let text = std::fs::read_to_string(common::scene_path("funnel")).unwrap();
-    let mut scene = mpmlab::scene::Scene::parse(&text, "funnel").unwrap();
+    let mut scene = mpmlab_engine::scene::Scene::parse(&text, "funnel").unwrap();
     scene.ibm[1].moves = true;
     scene.ibm[1].normal_displacement = Some(1.0);
-    let err = mpmlab::Model::build(&scene, &text, "funnel").unwrap_err().to_string();
+    let err = mpmlab_engine::Model::build(&scene, &text, "funnel")
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("moves") && err.contains("straight rollers"), "{err}");
 }
 
@@ -853,7 +858,7 @@ fn straight_channel_rollers_let_the_block_slide() {
 /// largest relative stress error at any point and the platen's reaction
 /// along its inward normal against the exact one (`angle`: the block's
 /// frame, degrees).
-fn finite_block(sim: &mut mpmlab::Simulation, angle: f64) -> Vec<(f64, f64)> {
+fn finite_block(sim: &mut mpmlab_engine::Simulation, angle: f64) -> Vec<(f64, f64)> {
     finite_block_energies(sim, angle)
         .into_iter()
         .map(|(e, r, _)| (e, r))
@@ -861,7 +866,10 @@ fn finite_block(sim: &mut mpmlab::Simulation, angle: f64) -> Vec<(f64, f64)> {
 }
 
 /// [`finite_block`], with each step's energies.
-fn finite_block_energies(sim: &mut mpmlab::Simulation, angle: f64) -> Vec<(f64, f64, mpmlab::report::Energy)> {
+fn finite_block_energies(
+    sim: &mut mpmlab_engine::Simulation,
+    angle: f64,
+) -> Vec<(f64, f64, mpmlab_engine::report::Energy)> {
     let mut out = Vec::new();
     while !sim.finished() {
         let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
@@ -920,10 +928,10 @@ fn block_roller_finite_at_30_degrees() {
     // basis the quadrature error of sub-cells that cross grid lines: the
     // shipped GIMP scene must still converge through all 10 steps.
     let mut sim = sim_with("block-roller-finite", |s| {
-        s.bodies[0].basis = mpmlab::basis::BasisKind::Standard;
+        s.bodies[0].basis = mpmlab_engine::basis::BasisKind::Standard;
         s.analysis.load_steps = 1;
         s.ibm[3].normal_displacement = Some(1.0);
-        if let Some(mpmlab::scene::ExactSpec::ConfinedYFinite { stretch, .. }) = s.exact.as_mut() {
+        if let Some(mpmlab_engine::scene::ExactSpec::ConfinedYFinite { stretch, .. }) = s.exact.as_mut() {
             *stretch = 0.99;
         }
     });
@@ -951,7 +959,7 @@ fn two_materials_on_one_roller_keep_their_own_stresses() {
     for kind in ["quasi-static-linear", "quasi-static-finite"] {
         let mut sim = sim_with("two-materials-roller", |s| {
             if kind == "quasi-static-finite" {
-                s.analysis.kind = mpmlab::scene::AnalysisKind::QuasiStaticFinite;
+                s.analysis.kind = mpmlab_engine::scene::AnalysisKind::QuasiStaticFinite;
                 // The residual's round-off floor here is ~1e-10 (cond ~1e12).
                 s.analysis.tolerance = 1e-8;
             }
@@ -992,8 +1000,8 @@ fn finite_cantilever_curve(angle: u32, h: f64, grid_clamp: bool) -> Vec<f64> {
         if grid_clamp {
             s.ibm.clear();
             s.probes.retain(|p| p.ibm.is_none());
-            s.dirichlet.push(mpmlab::scene::DirichletSpec {
-                kind: mpmlab::scene::DirichletKind::Fixed,
+            s.dirichlet.push(mpmlab_engine::scene::DirichletSpec {
+                kind: mpmlab_engine::scene::DirichletKind::Fixed,
                 x: Some(0.0),
                 y: None,
                 node: None,
@@ -1037,7 +1045,7 @@ fn slender_cantilever_finite_clamps_agree() {
 
 /// Settlement (m) and mean footing pressure over `c_u` after each step of
 /// the large-settlement footing.
-fn footing_curve(edit: impl FnOnce(&mut mpmlab::scene::Scene)) -> Vec<(f64, f64)> {
+fn footing_curve(edit: impl FnOnce(&mut mpmlab_engine::scene::Scene)) -> Vec<(f64, f64)> {
     let mut sim = sim_with("rigid-footing-large", edit);
     let spec = sim.model().ibm[0].clone();
     let half_width = (spec.points[0][0] - spec.points[1][0]).abs();
@@ -1109,7 +1117,7 @@ fn band_error_coefficient_matches_the_derivation() {
             s.ibm.retain(|b| b.name == "base");
             s.probes.clear();
             let roller = |x: Option<f64>, y: Option<f64>, u: f64| {
-                let mut r: mpmlab::scene::DirichletSpec = toml::from_str("kind = \"roller\"").expect("a roller");
+                let mut r: mpmlab_engine::scene::DirichletSpec = toml::from_str("kind = \"roller\"").expect("a roller");
                 (r.x, r.y, r.normal_displacement) = (x, y, Some(u));
                 r
             };

@@ -1,7 +1,7 @@
 //! Point generation: clipped sub-cells give total volume equal to the region
 //! area for polygons at any rotation and offset.
 
-use mpmlab::Model;
+use mpmlab_engine::Model;
 use proptest::prelude::*;
 
 fn scene(region: &str, ppc: usize) -> String {
@@ -35,7 +35,7 @@ fn total_volume(text: &str) -> (f64, f64) {
 
 /// The most area clipping may leave out along a boundary of length
 /// `perimeter`: pieces under 1e-9 of their cell or sub-cell are dropped
-/// (`MIN_PIECE`, src/model/bodies.rs), at most one per cell and one per
+/// (`MIN_PIECE`, engine/src/model/bodies.rs), at most one per cell and one per
 /// sub-cell the boundary crosses, and a straight boundary crosses at most
 /// `2 L / s + 2` cells of side `s` per segment (4 segments here, or the
 /// polygon's 7, counted as 8).

@@ -4,8 +4,8 @@
 
 use crate::common;
 use common::{error, run_all, sim_with};
-use mpmlab::exact::elastica_tip;
-use mpmlab::{Simulation, StepFailure};
+use mpmlab_engine::exact::elastica_tip;
+use mpmlab_engine::{Simulation, StepFailure};
 
 #[test]
 fn global_tangent_matches_finite_differences() {
@@ -17,7 +17,7 @@ fn global_tangent_matches_finite_differences() {
             s.grid.origin = [0.0, -9.0];
             s.analysis.gamma_k = gamma;
             if let Some(y) = yield_stress {
-                s.materials[0].model = mpmlab::scene::MaterialModel::VonMises;
+                s.materials[0].model = mpmlab_engine::scene::MaterialModel::VonMises;
                 s.materials[0].yield_stress = Some(y);
             }
         });
@@ -59,7 +59,7 @@ fn tangent_of_every_contribution_matches_finite_differences() {
             // GIMP stencils move a boundary point by more nodes.
             "follower pressure, GIMP",
             sim_with("cantilever-follower-pressure-finite", |s| {
-                s.bodies[0].basis = mpmlab::basis::BasisKind::Gimp;
+                s.bodies[0].basis = mpmlab_engine::basis::BasisKind::Gimp;
             }),
         ),
         (
@@ -172,7 +172,7 @@ fn newton_converges_quadratically() {
 }
 
 fn column_error(cells_tall: usize, gamma: f64) -> f64 {
-    let mut sim = sim_with("column-self-weight", mpmlab::verify::column(cells_tall, gamma));
+    let mut sim = sim_with("column-self-weight", mpmlab_engine::verify::column(cells_tall, gamma));
     let r = run_all(&mut sim);
     error(&r, "syy_normalised")
 }
@@ -350,7 +350,7 @@ fn translating_domain_conditioning() {
     positions.extend([1e-3, 1e-5, 1e-7, 1.0 + 1e-3, 1.0 + 1e-5, 1.0 + 1e-7]);
     for (k, &a) in positions.iter().enumerate() {
         let mut sim = sim_with("translating-domain", |s| {
-            s.bodies[0].region = mpmlab::scene::RegionSpec::Rectangle {
+            s.bodies[0].region = mpmlab_engine::scene::RegionSpec::Rectangle {
                 min: [a, 0.0],
                 max: [2.0 + a, 1.0],
             };

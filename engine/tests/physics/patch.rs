@@ -11,8 +11,8 @@
 
 use crate::common;
 use common::{error, run_all, sim_with};
-use mpmlab::basis::BasisKind;
-use mpmlab::scene::RegionSpec;
+use mpmlab_engine::basis::BasisKind;
+use mpmlab_engine::scene::RegionSpec;
 
 /// Relative errors at round-off: the discrete solution equals the exact
 /// linear field; the residual check already requires 1e-10, and the errors
