@@ -279,6 +279,50 @@ region = {{ shape = "rectangle", min = [{h}, {h}], max = [{two_h}, {two_h}] }}"#
 }
 
 #[test]
+fn cfl_number_of_an_off_centre_point_is_the_closed_form() {
+    // One point at local coordinates (xi, eta) of its cell, all four nodes
+    // free, nu = 0. Its nodes' lumped masses are m N_i, and with
+    // W = diag(1/N_i) the sums over the nodes are
+    //   sum_i (dN_i/dx)^2 / N_i = a/h^2,  a = 1/(xi (1 - xi)),
+    //   sum_i (dN_i/dy)^2 / N_i = b/h^2,  b = 1/(eta (1 - eta)),
+    //   sum_i (dN_i/dx)(dN_i/dy) / N_i = 0,
+    // so B W B^T = diag(a, b, a + b)/h^2 and, with D = E diag(1, 1, 1/2)
+    // and m = rho V, the nonzero eigenvalues of K = V B^T D B against
+    // M_L are E/(rho h^2) times a, b and (a + b)/2: lambda_max =
+    // E max(a, b)/(rho h^2) and G 3.5's C = 1/(h sqrt(lambda_max)). At the
+    // centre (a = b = 4) this is the test above. Off the centre the
+    // masses differ, so the power iteration's solve with M_L must be
+    // right: the top eigenvector of K alone is another one.
+    //
+    // The power iteration stops when two estimates agree to 1e-8; its
+    // Rayleigh quotient converges like (lambda_2/lambda_1)^2 per step,
+    // here at most (0.72)^2 = 0.52, so what is left is about 1e-8 of
+    // lambda, 0.5e-8 of C: the bound 1e-7 leaves a factor 20.
+    for (xi, eta, h, e, rho) in [(0.875, 0.5, 1.0f64, 1.0e3f64, 2.0f64), (0.5, 0.125, 0.5, 4.0, 1.0)] {
+        let (x, y) = ((1.0 + xi) * h, (1.0 + eta) * h);
+        let body = format!(
+            r#"points_per_cell = 1
+placement = "lattice"
+lattice = [1, 1]
+region = {{ shape = "rectangle", min = [{x0}, {y0}], max = [{x1}, {y1}] }}"#,
+            x0 = x - 0.25 * h,
+            x1 = x + 0.25 * h,
+            y0 = y - 0.25 * h,
+            y1 = y + 0.25 * h,
+        );
+        let sim = one_cell(h, e, rho, &body);
+        let c = sim.conditioning().unwrap().cfl_lumped.unwrap();
+        let (a, b) = (1.0 / (xi * (1.0 - xi)), 1.0 / (eta * (1.0 - eta)));
+        let exact = 1.0 / (h * (e * a.max(b) / (rho * h * h)).sqrt());
+        println!("xi = {xi}, eta = {eta}: CFL {c:.15e}, exact {exact:.15e}");
+        assert!(
+            (c - exact).abs() < 1e-7 * exact,
+            "xi = {xi}, eta = {eta}: {c} against {exact}"
+        );
+    }
+}
+
+#[test]
 fn lumped_mass_condition_is_the_largest_over_the_smallest_nodal_weight() {
     // One point at local coordinates (xi, eta) = (3/4, 1/2) of its cell
     // (lattice placement, h = 1): the lumped mass puts m N_i on the cell's
