@@ -1090,3 +1090,45 @@ pub(crate) fn tangent_check(sim: &Simulation, amplitude: f64) -> Result<f64, Ste
     }
     Ok(worst)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::sparse::{SparseColMat, Triplet};
+
+    /// `condition_with` reads a symmetric tangent from its lower triangle
+    /// and a general one from all its entries. `A = [[4, 1, 0], [1, 4, 3],
+    /// [0, 3, 10]]`: `|A|_1 = 13` (the third column; from the lower triangle
+    /// alone it would be 10, from all entries counted twice 16), and by
+    /// cofactors `A^-1 = [[31, -10, 3], [-10, 40, -12], [3, -12, 15]] / 114`,
+    /// `|A^-1|_1 = 62/114` (the second column). Hager's iteration reaches
+    /// that column on its third solve (by hand: `x = 1/3`, then `e_0`, then
+    /// `e_1`), and Higham's extra vector gives less (394/1026), so the
+    /// estimate is exactly `13 * 62/114`, to round-off in the solves.
+    #[test]
+    fn condition_estimate_is_the_one_norm_condition_of_the_stored_matrix() {
+        let a = [[4.0, 1.0, 0.0], [1.0, 4.0, 3.0], [0.0, 3.0, 10.0]];
+        let exact = 13.0 * 62.0 / 114.0;
+        for symmetry in [Symmetry::Symmetric, Symmetry::General] {
+            let mut t = Vec::new();
+            for c in 0..3 {
+                for r in 0..3 {
+                    let stored = symmetry == Symmetry::General || r >= c;
+                    if a[r][c] != 0.0 && stored {
+                        t.push(Triplet::new(r as linalg::Ix, c as linalg::Ix, a[r][c]));
+                    }
+                }
+            }
+            let k = SparseColMat::try_new_from_triplets(3, 3, &t).unwrap();
+            let s = Symbolic::new(k.as_ref(), symmetry).unwrap();
+            let mut f = Factorisation::new(&s, k.as_ref(), u64::MAX).unwrap();
+            let c = condition_with(k.as_ref(), symmetry, &mut f);
+            assert!(
+                (c.value - exact).abs() < 1e-12 * exact,
+                "{symmetry:?}: {} against {exact}",
+                c.value
+            );
+            assert_eq!(c.lambda_max, 13.0, "{symmetry:?}: the 1-norm");
+        }
+    }
+}
