@@ -1219,70 +1219,81 @@ fn roller_constraint_weights_are_exact_line_integrals() {
     // line), which gives the nodes one cell inside a grid-aligned boundary
     // weights of that order where the exact ones are 0: within the
     // tolerance too.
+    //
+    // The weights are lengths: the same problem scaled by 2^-10 (a grid in
+    // metres rather than millimetres; a power of two, so every coordinate
+    // scales exactly) must give the weights scaled by 2^-10, to the same
+    // relative bound. A nudge that did not scale with h would move every
+    // Gauss point by a fixed fraction of a smaller cell.
     use mpmlab_engine::scene::DirichletKind;
-    let grid = Grid {
-        origin: [-0.5, 0.25],
-        h: 0.5,
-        nx: 6,
-        ny: 6,
-    };
-    let hat = |x: [f64; 2], node: usize| {
-        let p = grid.node_position(node);
-        let f = |d: f64| (1.0 - d.abs() / grid.h).max(0.0);
-        f(x[0] - p[0]) * f(x[1] - p[1])
-    };
-    let inclined = vec![[0.1, 0.4], [0.9, 0.75], [1.7, 1.6]];
-    // On the grid line x = 1.0 (cells 3 | 4) and on y = 1.25 (rows 2 | 3).
-    let vertical = vec![[1.0, 0.6], [1.0, 2.1]];
-    let horizontal = vec![[0.1, 1.25], [1.7, 1.25]];
-    for (points, side) in [
-        (inclined, 1.0),
-        (vertical.clone(), 1.0),
-        (vertical, -1.0),
-        (horizontal.clone(), 1.0),
-        (horizontal, -1.0),
-    ] {
-        for kind in [DirichletKind::Roller, DirichletKind::Fixed] {
-            let boundary = polyline("b", kind, points.clone(), side);
-            let weights = boundary.constraint_weights(&grid);
-            let mut reference = vec![[[0.0; 2]; 2]; grid.num_nodes()];
-            for piece in points.windows(2) {
-                let (p, q) = (piece[0], piece[1]);
-                let (d, len) = ([q[0] - p[0], q[1] - p[1]], (q[0] - p[0]).hypot(q[1] - p[1]));
-                let t = [d[0] / len, d[1] / len];
-                let nrm = [-t[1], t[0]];
-                let proj = match kind {
-                    DirichletKind::Roller => [[nrm[0] * nrm[0], nrm[0] * nrm[1]], [nrm[1] * nrm[0], nrm[1] * nrm[1]]],
-                    DirichletKind::Fixed => [[1.0, 0.0], [0.0, 1.0]],
-                };
-                let k = 10_000;
-                for i in 0..k {
-                    let s = (i as f64 + 0.5) / k as f64;
-                    let x = [p[0] + s * d[0], p[1] + s * d[1]];
-                    for (node, w) in reference.iter_mut().enumerate() {
-                        let nk = hat(x, node);
-                        if nk > 0.0 {
-                            for r in 0..2 {
-                                for c in 0..2 {
-                                    w[r][c] += nk * len / k as f64 * proj[r][c];
+    for scale in [1.0, 1.0 / 1024.0] {
+        let grid = Grid {
+            origin: [-0.5 * scale, 0.25 * scale],
+            h: 0.5 * scale,
+            nx: 6,
+            ny: 6,
+        };
+        let hat = |x: [f64; 2], node: usize| {
+            let p = grid.node_position(node);
+            let f = |d: f64| (1.0 - d.abs() / grid.h).max(0.0);
+            f(x[0] - p[0]) * f(x[1] - p[1])
+        };
+        let at = |pts: &[[f64; 2]]| pts.iter().map(|p| [p[0] * scale, p[1] * scale]).collect::<Vec<_>>();
+        let inclined = at(&[[0.1, 0.4], [0.9, 0.75], [1.7, 1.6]]);
+        // On the grid line x = 1.0 (cells 3 | 4) and on y = 1.25 (rows 2 | 3).
+        let vertical = at(&[[1.0, 0.6], [1.0, 2.1]]);
+        let horizontal = at(&[[0.1, 1.25], [1.7, 1.25]]);
+        for (points, side) in [
+            (inclined, 1.0),
+            (vertical.clone(), 1.0),
+            (vertical, -1.0),
+            (horizontal.clone(), 1.0),
+            (horizontal, -1.0),
+        ] {
+            for kind in [DirichletKind::Roller, DirichletKind::Fixed] {
+                let boundary = polyline("b", kind, points.clone(), side);
+                let weights = boundary.constraint_weights(&grid);
+                let mut reference = vec![[[0.0; 2]; 2]; grid.num_nodes()];
+                for piece in points.windows(2) {
+                    let (p, q) = (piece[0], piece[1]);
+                    let (d, len) = ([q[0] - p[0], q[1] - p[1]], (q[0] - p[0]).hypot(q[1] - p[1]));
+                    let t = [d[0] / len, d[1] / len];
+                    let nrm = [-t[1], t[0]];
+                    let proj = match kind {
+                        DirichletKind::Roller => {
+                            [[nrm[0] * nrm[0], nrm[0] * nrm[1]], [nrm[1] * nrm[0], nrm[1] * nrm[1]]]
+                        }
+                        DirichletKind::Fixed => [[1.0, 0.0], [0.0, 1.0]],
+                    };
+                    let k = 10_000;
+                    for i in 0..k {
+                        let s = (i as f64 + 0.5) / k as f64;
+                        let x = [p[0] + s * d[0], p[1] + s * d[1]];
+                        for (node, w) in reference.iter_mut().enumerate() {
+                            let nk = hat(x, node);
+                            if nk > 0.0 {
+                                for r in 0..2 {
+                                    for c in 0..2 {
+                                        w[r][c] += nk * len / k as f64 * proj[r][c];
+                                    }
                                 }
                             }
                         }
                     }
                 }
-            }
-            let total: f64 = reference.iter().map(|w| w[0][0] + w[1][1]).sum();
-            assert!(total > 0.5, "{points:?} {kind:?}: the line carries weight");
-            for (node, w) in reference.iter().enumerate() {
-                let got = weights.get(&node).copied().unwrap_or([[0.0; 2]; 2]);
-                for r in 0..2 {
-                    for c in 0..2 {
-                        assert!(
-                            (got[r][c] - w[r][c]).abs() < 1e-8 * total,
-                            "{points:?} side {side} {kind:?} node {node} [{r}][{c}]: {} vs {}",
-                            got[r][c],
-                            w[r][c]
-                        );
+                let total: f64 = reference.iter().map(|w| w[0][0] + w[1][1]).sum();
+                assert!(total > 0.5 * scale, "{points:?} {kind:?}: the line carries weight");
+                for (node, w) in reference.iter().enumerate() {
+                    let got = weights.get(&node).copied().unwrap_or([[0.0; 2]; 2]);
+                    for r in 0..2 {
+                        for c in 0..2 {
+                            assert!(
+                                (got[r][c] - w[r][c]).abs() < 1e-8 * total,
+                                "scale {scale}, {points:?} side {side} {kind:?} node {node} [{r}][{c}]: {} vs {}",
+                                got[r][c],
+                                w[r][c]
+                            );
+                        }
                     }
                 }
             }
