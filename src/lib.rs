@@ -9,12 +9,9 @@
 //! state through [`runner::Observer`]; the engine cannot import them (it
 //! does not depend on this crate or its libraries).
 
-pub use mpmlab_engine::{
-    assembly, basis, boundary, bulk, checkpoint, dynamics, exact, field, geometry, ghost, grid, ibm, kinematics,
-    linalg, linear, material, model, points, probe, procfs, quadrature, report, runner, scene, simulation, solver,
-    state, units, verify,
-};
-pub use mpmlab_engine::{Model, Params, Simulation, Snapshot, StepFailure, StepReport};
+// Every public module and item of the engine, so a module the engine
+// adds is here without a list to keep.
+pub use mpmlab_engine::*;
 
 pub mod colormap;
 pub mod csv;
