@@ -881,7 +881,7 @@ fn step_with(sim: &mut Simulation, ws: &mut Workspace, s: Substep) -> Result<Ste
         return Err(StepFailure::Diverged {
             step,
             reason: format!(
-                "kinetic + strain energy {:.3e} J exceeds {} x (initial energy + work + dissipation) = {:.3e} J with the {} mass",
+                "kinetic + strain energy {:.6e} J exceeds {} x (initial energy + work + dissipation) = {:.6e} J with the {} mass",
                 kinetic + strain,
                 blowup_factor,
                 limit,

@@ -927,3 +927,55 @@ region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
         }
     }
 }
+
+#[test]
+fn a_tight_energy_guard_counts_strain_energy() {
+    // G 5.2's collision (stabilised mass, USF) keeps kinetic + strain
+    // energy within about 0.3% of W0 (G Table 3: 0.9e-3 on average). Its
+    // largest gain, +0.3%, comes while the ghosts are compressed, with more
+    // than half of W0 stored as strain. A guard of 1.001 x W0 (no loads, no
+    // dissipation) must stop the run at the first step whose kinetic +
+    // strain energy passes it. A guard that missed the strain energy would
+    // let the whole run through, as kinetic energy alone stays below W0
+    // while the ghosts are in contact.
+    let factor = 1.001;
+    let mut sim = sim_with("ghost-collision-elastic", |s| {
+        s.analysis.condition_every = 0;
+        s.analysis.max_cutbacks = 0;
+        s.analysis.blowup_factor = factor;
+    });
+    let mut strain_share = 0.0;
+    let failure = loop {
+        match sim.step() {
+            Ok(r) => {
+                let (e, w0) = (&r.energy, r.dynamics.as_ref().unwrap().initial_energy);
+                assert!(e.external_work == 0.0 && e.plastic_dissipation == 0.0);
+                assert!(
+                    e.kinetic + e.strain <= factor * w0,
+                    "step {}: accepted at {} x W0",
+                    r.step,
+                    (e.kinetic + e.strain) / w0
+                );
+                strain_share = e.strain / (e.kinetic + e.strain);
+                assert!(!sim.finished(), "the run passed a {factor} x W0 guard");
+            }
+            Err(f) => break f,
+        }
+    };
+    println!("1.001 x W0 guard: {failure}; strain share before it {strain_share:.3}");
+    assert!(
+        matches!(&failure, StepFailure::Diverged { reason, .. } if reason.contains("kinetic + strain energy")),
+        "{failure}"
+    );
+    // The guard trips during contact, not at the start (no strain yet),
+    // and its report tells the two energies apart at this ratio.
+    assert!(strain_share > 0.5, "strain share {strain_share}");
+    assert_eq!(sim.step_index() + 1, failure.step());
+    let reason = failure.to_string();
+    let number_after = |key: &str| -> f64 {
+        let rest = &reason[reason.find(key).unwrap() + key.len()..];
+        rest.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let (energy, limit) = (number_after("strain energy "), number_after(") = "));
+    assert!(energy > limit && energy < 1.01 * limit, "{reason}");
+}
