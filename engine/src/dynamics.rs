@@ -1241,11 +1241,14 @@ mod tests {
     /// The energy guard counts dissipation on the side of what entered:
     /// a plastic run that has dissipated `D` may hold `ku` up to
     /// `factor (W0 + |W| + D)`. With W0 = 2, W = -1 (the loads took 1 J
-    /// out), D = 1 and factor 10 the limit is 40 J: 39 passes, 41 does not.
-    /// A run with nothing in it (W0 = W = D = 0) is never stopped.
+    /// out), D = 1 and factor 10 the limit is 40 J: 39 passes, 41 does not,
+    /// and 40 itself passes (the guard trips beyond the limit; all these
+    /// numbers are exact in binary). A run with nothing in it
+    /// (W0 = W = D = 0) is never stopped.
     #[test]
     fn energy_guard_limit_is_factor_times_initial_energy_work_and_dissipation() {
         assert_eq!(energy_limit_exceeded(39.0, 2.0, -1.0, 1.0, 10.0), None);
+        assert_eq!(energy_limit_exceeded(40.0, 2.0, -1.0, 1.0, 10.0), None);
         assert_eq!(energy_limit_exceeded(41.0, 2.0, -1.0, 1.0, 10.0), Some(40.0));
         assert_eq!(energy_limit_exceeded(1.0, 0.0, 0.0, 0.0, 10.0), None);
     }
