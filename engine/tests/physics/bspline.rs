@@ -248,3 +248,32 @@ fn curves_along_and_touching_grid_lines_split_cleanly() {
     assert!((total - s.length()).abs() < 1e-12);
     assert!(pieces.iter().all(|p| p.t1 - p.t0 > 1e-9));
 }
+
+#[test]
+fn a_curve_that_doubles_back_has_a_cusp_not_nans() {
+    // (0,0) -> (1,0) -> (0,0) is accepted (no two consecutive points
+    // coincide) and turns back on itself at (1,0). There the chords on
+    // either side are opposite and collinear, B (9)-(10) weight them
+    // equally, and the tangent's direction is undefined: the interpolation
+    // gives it zero length, a cusp, so both segments stay on y = 0 and pass
+    // through the points. The normal at the cusp is zero (there is none),
+    // never NaN.
+    let q = [[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]];
+    let s = BSpline::interpolate(&q, false, &[]).unwrap();
+    for seg in &s.segments {
+        for p in seg {
+            assert!(p[0].is_finite() && p[1] == 0.0, "{:?}", s.segments);
+        }
+    }
+    for k in 0..2 {
+        assert_eq!(s.point(k, 0.0), q[k]);
+        assert_eq!(s.point(k, 1.0), q[k + 1]);
+    }
+    assert_eq!(s.d1(0, 1.0), [0.0, 0.0]);
+    assert_eq!(s.d1(1, 0.0), [0.0, 0.0]);
+    assert_eq!(s.right_normal(0, 1.0), [0.0, 0.0]);
+    // Away from the cusp the normal is the unit normal to the right of
+    // travel: -y on the way out, +y on the way back.
+    assert!(close(s.right_normal(0, 0.5), [0.0, -1.0], 1e-15));
+    assert!(close(s.right_normal(1, 0.5), [0.0, 1.0], 1e-15));
+}
