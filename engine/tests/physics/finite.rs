@@ -444,3 +444,32 @@ fn exhausted_cutbacks_fail_and_restore_the_step_start() {
     assert_eq!(sim.step_index(), 0);
     assert_eq!(sim.points().x, before);
 }
+
+#[test]
+fn line_search_gives_up_after_ten_halvings() {
+    // G 5.4's column loaded by its whole self weight in one increment, with
+    // E 100 and 10^4 times too small: no fraction of the Newton correction
+    // down to 2^-10 lowers the residual, and the corrections soon invert
+    // cells (a NaN residual). The line search halves at most 10 times, then
+    // takes the step: the NaN it lands on ends the increment as a
+    // non-finite residual, which a cutback may retry. A search that kept
+    // halving would never accept a NaN (it is never "better"), and would
+    // spend hundreds of residuals per iteration creeping to the iteration
+    // limit instead.
+    for softer in [1e2, 1e4] {
+        let mut sim = sim_with("column-self-weight", |s| {
+            s.analysis.load_steps = 1;
+            s.analysis.max_cutbacks = 0;
+            s.analysis.line_search = true;
+            s.materials[0].e /= softer;
+        });
+        let max_iterations = sim.model().analysis.max_iterations;
+        let failure = sim.step().unwrap_err();
+        println!("E / {softer:e}: {failure}");
+        let StepFailure::NonFinite { residuals, .. } = &failure else {
+            panic!("{failure}")
+        };
+        assert!(residuals.len() <= max_iterations + 1, "{failure}");
+        assert!(residuals.last().unwrap().is_nan(), "{failure}");
+    }
+}
