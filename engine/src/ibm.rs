@@ -1109,12 +1109,14 @@ mod tests {
             assert!((w - want).abs() < 1e-15, "node ({i}, {j}) component {c}: {w} vs {want}");
         }
         // With the base below the grid the bottom row is in the material:
-        // its edges count like the top row's.
+        // its edges count like the top row's. The held column's bottom
+        // node has one edge, up the column (the line below it is off the
+        // grid and, past the base, partly outside the material).
         let mut low = bs[0].clone();
         low.points = vec![[-1.0, -0.5], [5.0, -0.5]];
         let low = [low];
         let step = IbmStep { bs: &low, ..step };
-        for (i, j, c, want) in [(2, 0, 1, h), (2, 1, 1, 0.5 * h), (4, 0, 1, 0.5 * h)] {
+        for (i, j, c, want) in [(2, 0, 1, h), (2, 1, 1, 0.5 * h), (4, 0, 1, 0.5 * h), (0, 0, 0, 0.5 * h)] {
             let w = step.grid_weight(&grid, &free, grid.node(i, j), c);
             assert!(
                 (w - want).abs() < 1e-15,
