@@ -473,3 +473,30 @@ fn line_search_gives_up_after_ten_halvings() {
         assert!(residuals.last().unwrap().is_nan(), "{failure}");
     }
 }
+
+#[test]
+fn line_search_carries_an_increment_full_newton_cannot() {
+    // G 5.4's column, 5 and 20 times too soft, under its whole self weight
+    // in one increment: full Newton corrections overshoot (the residual
+    // grows, by 17 times at E / 5) and end in a NaN; halving each one
+    // until the residual falls converges within the scene's 10 iterations,
+    // every accepted residual below the one before.
+    for softer in [5.0, 20.0] {
+        let column = |line_search: bool| {
+            sim_with("column-self-weight", |s| {
+                s.analysis.load_steps = 1;
+                s.analysis.max_cutbacks = 0;
+                s.analysis.line_search = line_search;
+                s.materials[0].e /= softer;
+            })
+        };
+        let failure = column(false).step().unwrap_err();
+        assert!(matches!(failure, StepFailure::NonFinite { .. }), "{failure}");
+        let r = column(true).step().unwrap_or_else(|f| panic!("E / {softer}: {f}"));
+        println!(
+            "E / {softer}: full Newton {failure}; with the line search {:?}",
+            r.residuals
+        );
+        assert!(r.residuals.windows(2).all(|w| w[1] <= w[0]), "{:?}", r.residuals);
+    }
+}
