@@ -448,10 +448,10 @@ fn exhausted_cutbacks_fail_and_restore_the_step_start() {
 #[test]
 fn line_search_gives_up_after_ten_halvings() {
     // G 5.4's column loaded by its whole self weight in one increment, with
-    // E 100 and 10^4 times too small: no fraction of the Newton correction
-    // down to 2^-10 lowers the residual, and the corrections soon invert
-    // cells (a NaN residual). The line search halves at most 10 times, then
-    // takes the step: the NaN it lands on ends the increment as a
+    // E 100 and 10^4 times too small: within a few iterations no fraction
+    // of the Newton correction down to 2^-10 lowers the residual, and the
+    // last one tried makes it NaN. The line search halves at most 10 times,
+    // then takes the step: the NaN it lands on ends the increment as a
     // non-finite residual, which a cutback may retry. A search that kept
     // halving would never accept a NaN (it is never "better"), and would
     // spend hundreds of residuals per iteration creeping to the iteration
