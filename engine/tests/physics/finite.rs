@@ -445,6 +445,17 @@ fn exhausted_cutbacks_fail_and_restore_the_step_start() {
     assert_eq!(sim.points().x, before);
 }
 
+/// G 5.4's column with `E` divided by `softer`, its whole self weight in
+/// one increment and no cutbacks: a hard first step for Newton.
+fn soft_column_in_one_increment(softer: f64, line_search: bool) -> Simulation {
+    sim_with("column-self-weight", |s| {
+        s.analysis.load_steps = 1;
+        s.analysis.max_cutbacks = 0;
+        s.analysis.line_search = line_search;
+        s.materials[0].e /= softer;
+    })
+}
+
 #[test]
 fn line_search_gives_up_after_ten_halvings() {
     // G 5.4's column loaded by its whole self weight in one increment, with
@@ -457,12 +468,7 @@ fn line_search_gives_up_after_ten_halvings() {
     // spend hundreds of residuals per iteration creeping to the iteration
     // limit instead.
     for softer in [1e2, 1e4] {
-        let mut sim = sim_with("column-self-weight", |s| {
-            s.analysis.load_steps = 1;
-            s.analysis.max_cutbacks = 0;
-            s.analysis.line_search = true;
-            s.materials[0].e /= softer;
-        });
+        let mut sim = soft_column_in_one_increment(softer, true);
         let max_iterations = sim.model().analysis.max_iterations;
         let failure = sim.step().unwrap_err();
         println!("E / {softer:e}: {failure}");
@@ -482,17 +488,11 @@ fn line_search_carries_an_increment_full_newton_cannot() {
     // until the residual falls converges within the scene's 10 iterations,
     // every accepted residual below the one before.
     for softer in [5.0, 20.0] {
-        let column = |line_search: bool| {
-            sim_with("column-self-weight", |s| {
-                s.analysis.load_steps = 1;
-                s.analysis.max_cutbacks = 0;
-                s.analysis.line_search = line_search;
-                s.materials[0].e /= softer;
-            })
-        };
-        let failure = column(false).step().unwrap_err();
+        let failure = soft_column_in_one_increment(softer, false).step().unwrap_err();
         assert!(matches!(failure, StepFailure::NonFinite { .. }), "{failure}");
-        let r = column(true).step().unwrap_or_else(|f| panic!("E / {softer}: {f}"));
+        let r = soft_column_in_one_increment(softer, true)
+            .step()
+            .unwrap_or_else(|f| panic!("E / {softer}: {f}"));
         println!(
             "E / {softer}: full Newton {failure}; with the line search {:?}",
             r.residuals
