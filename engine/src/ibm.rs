@@ -1124,4 +1124,73 @@ mod tests {
             );
         }
     }
+
+    /// The end node of a held grid line, next to a boundary across the
+    /// line: its one edge must run from the node towards its neighbour,
+    /// with the edge's true length. Cells of h = 0.5 (so that dividing by
+    /// the edge's length is not multiplying by it), `u_x` held on the
+    /// columns x = 0 and x = 2 and `u_y` on the rows y = 0 and y = 2, one
+    /// fixed straight boundary with the material on its left. Each case
+    /// wants one whole edge inside the material, h/2; an edge that ran the
+    /// other way, too far, or from the wrong place would cross the
+    /// boundary (the 3-point Gauss rule then gives 0.469 h or less).
+    #[test]
+    fn a_held_lines_end_node_weighs_its_own_edge() {
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            h: 0.5,
+            nx: 4,
+            ny: 4,
+        };
+        let free = |n: usize, c: usize| {
+            let (i, j) = grid.node_ij(n);
+            match c {
+                0 => i != 0 && i != grid.nx,
+                _ => j != 0 && j != grid.ny,
+            }
+        };
+        let h = grid.h;
+        for (points, (i, j, c)) in [
+            // Rows: a wall a half cell beyond the right end (material to
+            // its left), or a cell and a half from the left end.
+            ([[2.25, -1.0], [2.25, 3.0]], (4, 0, 1)),
+            ([[0.75, -1.0], [0.75, 3.0]], (0, 0, 1)),
+            // Columns: a boundary a half cell above the top end
+            // (material below), or a cell and a half above the bottom.
+            ([[3.0, 2.25], [-1.0, 2.25]], (0, 4, 0)),
+            ([[3.0, 0.75], [-1.0, 0.75]], (0, 0, 0)),
+            // The far end of each line with the material beyond a boundary
+            // a half cell before the near end: the far end's edge, and
+            // only that, is inside.
+            ([[-0.25, 3.0], [-0.25, -1.0]], (4, 0, 1)),
+            ([[-1.0, -0.25], [3.0, -0.25]], (0, 4, 0)),
+        ] {
+            let wall = IbmBoundary {
+                name: "wall".into(),
+                kind: DirichletKind::Fixed,
+                points: points.to_vec(),
+                side: 1.0,
+                value: [0.0, 0.0],
+                gauss_points: 2,
+                exact_field: false,
+                fit_regularisation: None,
+                moves: false,
+                spline: None,
+            };
+            let bs = [wall];
+            let step = IbmStep {
+                bs: &bs,
+                delta: 1e-6,
+                da: vec![[0.0; 2]; grid.num_nodes()],
+                in_band: vec![],
+                fit_regularisation: 0.0,
+            };
+            let w = step.grid_weight(&grid, &free, grid.node(i, j), c);
+            assert!(
+                (w - 0.5 * h).abs() < 1e-15,
+                "wall {points:?}, node ({i}, {j}) component {c}: {w} vs {}",
+                0.5 * h
+            );
+        }
+    }
 }
