@@ -1193,4 +1193,79 @@ mod tests {
             );
         }
     }
+
+    /// The violation a step reports: on the boundary (phi = 0, where D
+    /// vanishes) the increment is the interpolated `d^a`, so a linear `d^a`
+    /// gives a deviation from the prescribed increment whose square is a
+    /// quadratic along the boundary, which hats reproduce exactly and
+    /// 3-point Gauss integrates exactly on each piece. A 4 x 4 grid of unit
+    /// cells, `d^a = (s x, s x)` with s = 0.01, prescribed values (0.02,
+    /// 0.01) at the load-factor increment 0.5, and the line y = 0.5 + x/2
+    /// from x = 0 to 4 inside the grid (inward normal n = (-1, 2)/sqrt 5):
+    /// - fixed: `v^2 = (s x - 0.01)^2 + (s x - 0.005)^2 = 10^-4 ((x - 1)^2 +
+    ///   (x - 0.5)^2)`, the largest 0.01 sqrt 21.25 (at x = 4), the root
+    ///   mean square over the arc `sqrt((1/4) int_0^4 v^2 dx) = 0.01
+    ///   sqrt(71/12)`;
+    /// - roller: `v = |d^a . n - 0.01| = 0.01 |x/sqrt 5 - 1|`, the largest
+    ///   0.01 (at x = 0), the root mean square 0.01 sqrt((64/15 - 16/sqrt 5
+    ///   + 4)/4).
+    #[test]
+    fn the_violation_is_the_deviation_along_the_boundary() {
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            h: 1.0,
+            nx: 4,
+            ny: 4,
+        };
+        let s = 0.01;
+        let nn = grid.num_nodes();
+        let da: Vec<P2> = (0..nn).map(|n| [s * grid.node_position(n)[0]; 2]).collect();
+        let zero = vec![[0.0; 2]; nn];
+        let free = |_: usize, _: usize| true;
+        let r5 = 5f64.sqrt();
+        for (kind, largest, rms) in [
+            (
+                DirichletKind::Fixed,
+                0.01 * 21.25f64.sqrt(),
+                0.01 * (71.0f64 / 12.0).sqrt(),
+            ),
+            (
+                DirichletKind::Roller,
+                0.01,
+                0.01 * ((64.0 / 15.0 - 16.0 / r5 + 4.0) / 4.0f64).sqrt(),
+            ),
+        ] {
+            let line = IbmBoundary {
+                name: "line".into(),
+                kind,
+                points: vec![[-1.0, 0.0], [5.0, 3.0]],
+                side: 1.0,
+                value: [0.02, 0.01],
+                gauss_points: 2,
+                exact_field: false,
+                fit_regularisation: None,
+                moves: false,
+                spline: None,
+            };
+            let bs = [line];
+            let step = IbmStep {
+                bs: &bs,
+                delta: 1e-6,
+                da: da.clone(),
+                in_band: vec![],
+                fit_regularisation: 0.0,
+            };
+            let (reports, _) = step.reports(&grid, &free, &zero, &zero, &zero, None, 0.5);
+            let r = &reports[0];
+            // The stencils are taken 1e-12 h off the boundary (to pick the
+            // cell on its material side), which moves v by up to
+            // sqrt 2 s 1e-12 h = 1.4e-14; round-off is smaller.
+            assert!(
+                (r.violation - largest).abs() < 3e-14 && (r.violation_rms - rms).abs() < 3e-14,
+                "{kind:?}: largest {} vs {largest}, rms {} vs {rms}",
+                r.violation,
+                r.violation_rms
+            );
+        }
+    }
 }
