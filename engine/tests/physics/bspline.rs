@@ -277,3 +277,19 @@ fn a_curve_that_doubles_back_has_a_cusp_not_nans() {
     assert!(close(s.right_normal(0, 0.5), [0.0, -1.0], 1e-15));
     assert!(close(s.right_normal(1, 0.5), [0.0, 1.0], 1e-15));
 }
+
+#[test]
+fn interpolation_refuses_too_few_or_repeated_points_by_name() {
+    // The scene checks report these messages on the boundary's `points`
+    // field, so they must say which points and how many.
+    let two = [[0.0, 0.0], [1.0, 0.0]];
+    let e = Interpolation::new(&two, false, &[false; 2]).err().expect("two points");
+    assert_eq!(e.to_string(), "a boundary needs at least 3 points, got 2");
+    let three = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
+    assert!(Interpolation::new(&three, false, &[false; 3]).is_ok());
+    let repeated = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [2.0, 1.0]];
+    let e = BSpline::interpolate(&repeated, false, &[false; 4])
+        .err()
+        .expect("a repeated point");
+    assert_eq!(e.to_string(), "boundary points 1 and 2 coincide");
+}
