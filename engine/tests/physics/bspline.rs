@@ -288,8 +288,6 @@ fn interpolation_refuses_too_few_or_repeated_points_by_name() {
     let three = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
     assert!(Interpolation::new(&three, false, &[false; 3]).is_ok());
     let repeated = [[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [2.0, 1.0]];
-    let e = BSpline::interpolate(&repeated, false, &[false; 4])
-        .err()
-        .expect("a repeated point");
+    let e = BSpline::interpolate(&repeated, false, &[false; 4]).expect_err("a repeated point");
     assert_eq!(e.to_string(), "boundary points 1 and 2 coincide");
 }
