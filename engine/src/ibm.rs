@@ -1044,6 +1044,35 @@ pub fn nodal_motion(nodal_d: &[P2], ibm: Option<&IbmStep>) -> Vec<P2> {
 mod tests {
     use super::*;
 
+    /// A fixed straight (or polyline) boundary through `points`, the
+    /// material on its left, prescribing zero.
+    fn line(points: &[P2]) -> IbmBoundary {
+        IbmBoundary {
+            name: "line".into(),
+            kind: DirichletKind::Fixed,
+            points: points.to_vec(),
+            side: 1.0,
+            value: [0.0, 0.0],
+            gauss_points: 2,
+            exact_field: false,
+            fit_regularisation: None,
+            moves: false,
+            spline: None,
+        }
+    }
+
+    /// A step of the boundaries `bs` with the band 1e-6 h and the nodal
+    /// prescribed increments `da`.
+    fn step_with(bs: &[IbmBoundary], da: Vec<P2>) -> IbmStep<'_> {
+        IbmStep {
+            bs,
+            delta: 1e-6,
+            da,
+            in_band: vec![],
+            fit_regularisation: 0.0,
+        }
+    }
+
     /// `grid_weight` is `int N_n ds` over the grid lines from `n` to the
     /// neighbours held in the same component, inside the material: each
     /// whole edge gives `int_0^h (1 - s/h) ds = h/2`. A 4 x 4 grid of unit
@@ -1059,26 +1088,8 @@ mod tests {
             nx: 4,
             ny: 4,
         };
-        let base = IbmBoundary {
-            name: "base".into(),
-            kind: DirichletKind::Fixed,
-            points: vec![[-1.0, 0.5], [5.0, 0.5]],
-            side: 1.0,
-            value: [0.0, 0.0],
-            gauss_points: 2,
-            exact_field: false,
-            fit_regularisation: None,
-            moves: false,
-            spline: None,
-        };
-        let bs = [base];
-        let step = IbmStep {
-            bs: &bs,
-            delta: 1e-6,
-            da: vec![[0.0; 2]; grid.num_nodes()],
-            in_band: vec![],
-            fit_regularisation: 0.0,
-        };
+        let bs = [line(&[[-1.0, 0.5], [5.0, 0.5]])];
+        let step = step_with(&bs, vec![[0.0; 2]; grid.num_nodes()]);
         let free = |n: usize, c: usize| {
             let (i, j) = grid.node_ij(n);
             match c {
@@ -1165,26 +1176,8 @@ mod tests {
             ([[-0.25, 3.0], [-0.25, -1.0]], (4, 0, 1)),
             ([[-1.0, -0.25], [3.0, -0.25]], (0, 4, 0)),
         ] {
-            let wall = IbmBoundary {
-                name: "wall".into(),
-                kind: DirichletKind::Fixed,
-                points: points.to_vec(),
-                side: 1.0,
-                value: [0.0, 0.0],
-                gauss_points: 2,
-                exact_field: false,
-                fit_regularisation: None,
-                moves: false,
-                spline: None,
-            };
-            let bs = [wall];
-            let step = IbmStep {
-                bs: &bs,
-                delta: 1e-6,
-                da: vec![[0.0; 2]; grid.num_nodes()],
-                in_band: vec![],
-                fit_regularisation: 0.0,
-            };
+            let bs = [line(&points)];
+            let step = step_with(&bs, vec![[0.0; 2]; grid.num_nodes()]);
             let w = step.grid_weight(&grid, &free, grid.node(i, j), c);
             assert!(
                 (w - 0.5 * h).abs() < 1e-15,
@@ -1235,26 +1228,12 @@ mod tests {
                 0.01 * ((64.0 / 15.0 - 16.0 / r5 + 4.0) / 4.0f64).sqrt(),
             ),
         ] {
-            let line = IbmBoundary {
-                name: "line".into(),
+            let bs = [IbmBoundary {
                 kind,
-                points: vec![[-1.0, 0.0], [5.0, 3.0]],
-                side: 1.0,
                 value: [0.02, 0.01],
-                gauss_points: 2,
-                exact_field: false,
-                fit_regularisation: None,
-                moves: false,
-                spline: None,
-            };
-            let bs = [line];
-            let step = IbmStep {
-                bs: &bs,
-                delta: 1e-6,
-                da: da.clone(),
-                in_band: vec![],
-                fit_regularisation: 0.0,
-            };
+                ..line(&[[-1.0, 0.0], [5.0, 3.0]])
+            }];
+            let step = step_with(&bs, da.clone());
             let (reports, _) = step.reports(&grid, &free, &zero, &zero, &zero, None, 0.5);
             let r = &reports[0];
             // The stencils are taken 1e-12 h off the boundary (to pick the
@@ -1296,16 +1275,9 @@ mod tests {
             })
             .collect();
         let circle = IbmBoundary {
-            name: "circle".into(),
-            kind: DirichletKind::Fixed,
-            points: points.clone(),
-            side: 1.0,
-            value: [0.0, 0.0],
-            gauss_points: 2,
             exact_field: true,
             fit_regularisation: Some(0.0),
-            moves: false,
-            spline: None,
+            ..line(&points)
         };
         let ex = ExactSolution::ColumnSelfWeight {
             rho_g: 2.0e4,
