@@ -1061,6 +1061,18 @@ mod tests {
         }
     }
 
+    /// Which dofs are free when the grid holds `u_x` on its left and right
+    /// columns and `u_y` on its bottom and top rows.
+    fn held_at_the_edges(grid: &Grid) -> impl Fn(usize, usize) -> bool + '_ {
+        move |n, c| {
+            let (i, j) = grid.node_ij(n);
+            match c {
+                0 => i != 0 && i != grid.nx,
+                _ => j != 0 && j != grid.ny,
+            }
+        }
+    }
+
     /// A step of the boundaries `bs` with the band 1e-6 h and the nodal
     /// prescribed increments `da`.
     fn step_with(bs: &[IbmBoundary], da: Vec<P2>) -> IbmStep<'_> {
@@ -1090,13 +1102,7 @@ mod tests {
         };
         let bs = [line(&[[-1.0, 0.5], [5.0, 0.5]])];
         let step = step_with(&bs, vec![[0.0; 2]; grid.num_nodes()]);
-        let free = |n: usize, c: usize| {
-            let (i, j) = grid.node_ij(n);
-            match c {
-                0 => i != 0 && i != grid.nx,
-                _ => j != 0 && j != grid.ny,
-            }
-        };
+        let free = held_at_the_edges(&grid);
         let h = grid.h;
         for (i, j, c, want) in [
             // On a held column: the edges up and down it.
@@ -1153,13 +1159,7 @@ mod tests {
             nx: 4,
             ny: 4,
         };
-        let free = |n: usize, c: usize| {
-            let (i, j) = grid.node_ij(n);
-            match c {
-                0 => i != 0 && i != grid.nx,
-                _ => j != 0 && j != grid.ny,
-            }
-        };
+        let free = held_at_the_edges(&grid);
         let h = grid.h;
         for (points, (i, j, c)) in [
             // Rows: a wall a half cell beyond the right end (material to
