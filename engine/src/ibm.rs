@@ -1372,4 +1372,23 @@ mod tests {
             }
         }
     }
+
+    /// A boundary with no piece in the grid has no length to average over:
+    /// its report is zero deviation, not 0/0.
+    #[test]
+    fn a_boundary_off_the_grid_reports_no_violation_not_nan() {
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            h: 1.0,
+            nx: 4,
+            ny: 4,
+        };
+        let nn = grid.num_nodes();
+        let zero = vec![[0.0; 2]; nn];
+        let bs = [line(&[[-1.0, 6.0], [5.0, 7.0]])];
+        let step = step_with(&bs, zero.clone());
+        let (reports, _) = step.reports(&grid, &|_, _| true, &zero, &zero, &zero, None, 1.0);
+        let r = &reports[0];
+        assert_eq!((r.cut_cells, r.violation, r.violation_rms), (0, 0.0, 0.0), "{r:?}");
+    }
 }
