@@ -1253,8 +1253,9 @@ mod tests {
     /// boundary: `int N_k (N d^a - u) dS = 0`. Checked with an integral of
     /// the test's own: the polygon (a circle of radius 1.3 m in 40 chords,
     /// on cells of 0.5 m) split at the grid lines by hand, 5-point Gauss
-    /// on each piece (exact: the integrand is a polynomial of degree 4 on
-    /// a piece), and the bilinear hats written out. The field is the
+    /// on each piece where the fit uses 3 (exact: the integrand is a
+    /// polynomial of degree 4 on a piece), and the bilinear hats written
+    /// out. The field is the
     /// self-weight column's, quadratic in y, which the hats cannot
     /// represent, so the misfit is not zero and a fit weighted otherwise
     /// along the boundary would not be orthogonal.
@@ -1299,22 +1300,7 @@ mod tests {
         // Per node: int N_k (N d^a - u) dS, and int N_k |u| dS for scale.
         let mut misfit = vec![[0.0; 2]; grid.num_nodes()];
         let mut scale = vec![0.0; grid.num_nodes()];
-        let (gx, gw) = (
-            [
-                -0.906_179_845_938_664,
-                -0.538_469_310_105_683_1,
-                0.0,
-                0.538_469_310_105_683_1,
-                0.906_179_845_938_664,
-            ],
-            [
-                0.236_926_885_056_189_1,
-                0.478_628_670_499_366_5,
-                0.568_888_888_888_888_9,
-                0.478_628_670_499_366_5,
-                0.236_926_885_056_189_1,
-            ],
-        );
+        let (gx, gw) = gauss_legendre(5);
         for w in points.windows(2) {
             let (a, b) = (w[0], w[1]);
             let mut ts = vec![0.0, 1.0];
