@@ -798,6 +798,11 @@ fn a_time_step_moving_points_past_a_cell_is_cut_back() {
         assert!((c.to - c.from - dt).abs() < 1e-15, "{c:?}");
         // A sub-step of dt / 2 moved the points less than a cell.
         assert!(d.max_speed * dt / 2.0 < 0.1, "{}", d.max_speed);
+        // The step's increment is that of the whole step, as for a step not
+        // cut back (the largest grid speed times dt): more than a cell,
+        // which is why it was cut back.
+        assert_eq!(r.max_increment, d.max_speed * dt);
+        assert!(r.max_increment > 0.1, "step {}: {} m", r.step, r.max_increment);
     }
 
     // The same as twice the steps at the papers' fixed step: the sub-steps
@@ -878,6 +883,12 @@ fn exhausted_time_step_cutbacks_fail_and_restore_the_step_start() {
     };
     assert!(
         reason.contains("more than a cell") && reason.contains("cutback"),
+        "{reason}"
+    );
+    // The message names the step's dt (0.05 s) and, one halving deep, the
+    // smallest sub-step tried (0.025 s).
+    assert!(
+        reason.contains("of the time step 5.000e-2 s (sub-steps down to 2.500e-2 s; analysis.max_cutbacks = 1)"),
         "{reason}"
     );
     assert_eq!(sim.step_index() + 1, *step);
