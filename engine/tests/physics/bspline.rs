@@ -291,3 +291,54 @@ fn interpolation_refuses_too_few_or_repeated_points_by_name() {
     let e = BSpline::interpolate(&repeated, false, &[false; 4]).expect_err("a repeated point");
     assert_eq!(e.to_string(), "boundary points 1 and 2 coincide");
 }
+
+#[test]
+fn derivatives_are_those_of_the_curve_they_belong_to() {
+    // On a curved closed spline (9 points on an ellipse of semi-axes 2 m and
+    // 1 m), d1 and d2 are the derivatives in t of `point` and of `d1`,
+    // checked by central differences of step e = 1e-4. Each segment is a
+    // cubic: the central difference of `point` is C'(t) + e^2/6 C'''
+    // exactly (measured off by 2.2e-9 m), and that of the quadratic `d1` is
+    // C''(t) exactly, to round-off (about 1e-16 / e: measured 1.9e-12 m).
+    // Both derivatives are of order 1 m here (measured up to 1.36 m and
+    // 1.35 m), so tolerances of 1e-7 m and 1e-9 m leave the differences' own
+    // errors far behind, while a wrong term of either derivative moves it at
+    // first order.
+    let q: Vec<[f64; 2]> = (0..9)
+        .map(|k| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / 9.0;
+            [2.0 * a.cos(), a.sin()]
+        })
+        .collect();
+    let s = BSpline::interpolate(&q, true, &[]).unwrap();
+    let e = 1e-4;
+    let (mut largest, mut miss) = ([0.0f64; 2], [0.0f64; 2]);
+    for k in 0..s.segments.len() {
+        for t in [0.1, 0.35, 0.5, 0.8, 0.95] {
+            let (d1, d2) = (s.d1(k, t), s.d2(k, t));
+            let (p, m) = (s.point(k, t + e), s.point(k, t - e));
+            let fd1 = [(p[0] - m[0]) / (2.0 * e), (p[1] - m[1]) / (2.0 * e)];
+            let (p, m) = (s.d1(k, t + e), s.d1(k, t - e));
+            let fd2 = [(p[0] - m[0]) / (2.0 * e), (p[1] - m[1]) / (2.0 * e)];
+            for (i, (d, fd)) in [(d1, fd1), (d2, fd2)].into_iter().enumerate() {
+                largest[i] = largest[i].max(d[0].hypot(d[1]));
+                miss[i] = miss[i].max((d[0] - fd[0]).abs().max((d[1] - fd[1]).abs()));
+            }
+            assert!(
+                close(d1, fd1, 1e-7),
+                "segment {k}, t = {t}: d1 {d1:?}, differences {fd1:?}"
+            );
+            assert!(
+                close(d2, fd2, 1e-9),
+                "segment {k}, t = {t}: d2 {d2:?}, differences {fd2:?}"
+            );
+        }
+    }
+    println!(
+        "|d1| <= {:.3}, |d2| <= {:.3}; differences off by {:.1e} and {:.1e}",
+        largest[0], largest[1], miss[0], miss[1]
+    );
+    // The derivatives the tolerances are small against: of order 1 on an
+    // ellipse, never zero.
+    assert!(largest[0] > 0.5 && largest[1] > 0.5, "{largest:?}");
+}
