@@ -1044,3 +1044,19 @@ fn a_tight_energy_guard_counts_strain_energy() {
     let (energy, limit) = (number_after("strain energy "), number_after(") = "));
     assert!(energy > limit && energy < 1.01 * limit, "{reason}");
 }
+
+#[test]
+fn conditioning_is_measured_at_the_first_step_and_every_nth() {
+    // `condition_every = 3`: the mass conditioning (dense eigenvalues) is
+    // measured at step 1, so a run shows it from its start, and then at
+    // every third step; 0 never measures it.
+    for (every, expected) in [(3, vec![1, 3, 6]), (0, vec![])] {
+        let mut sim = sim_with("translating-ghost", |s| s.analysis.condition_every = every);
+        let measured: Vec<usize> = (0..7)
+            .map(|_| sim.step().unwrap_or_else(|f| panic!("{f}")))
+            .filter(|r| r.dynamics.as_ref().unwrap().conditioning.is_some())
+            .map(|r| r.step)
+            .collect();
+        assert_eq!(measured, expected, "condition_every = {every}");
+    }
+}
