@@ -43,3 +43,67 @@ pub fn error(r: &StepReport, name: &str) -> f64 {
         .unwrap_or_else(|| panic!("no error `{name}`"))
         .value
 }
+
+/// `scene` in other units of length: every length and position times `f`,
+/// every prescribed displacement with them; stresses, tractions and moduli
+/// unchanged, so strains and stresses are those of the original and its
+/// displacements those times `f`. For the regions, supports, boundaries and
+/// exact solutions the unit tests scale; anything else (gravity, whose
+/// stresses grow with length) panics rather than being left unscaled.
+pub fn scale_lengths(scene: &mut Scene, f: f64) {
+    use mpmlab_engine::scene::{ExactSpec, RegionSpec};
+    let p = |x: [f64; 2]| [f * x[0], f * x[1]];
+    fn region(r: &mut RegionSpec, f: f64) {
+        let p = |x: &mut [f64; 2]| *x = [f * x[0], f * x[1]];
+        match r {
+            RegionSpec::Rectangle { min, max } => {
+                p(min);
+                p(max);
+            }
+            RegionSpec::Polygon { vertices } => vertices.iter_mut().for_each(p),
+            RegionSpec::Rotated {
+                about, region: inner, ..
+            } => {
+                p(about);
+                region(inner, f);
+            }
+            other => panic!("scale_lengths: region {other:?} is not scaled"),
+        }
+    }
+    assert!(
+        scene.loads.gravity.is_none() && scene.loads.point.is_empty(),
+        "scale_lengths: loads are not scaled"
+    );
+    scene.grid.origin = p(scene.grid.origin);
+    scene.grid.size = p(scene.grid.size);
+    scene.grid.h *= f;
+    for b in &mut scene.bodies {
+        region(&mut b.region, f);
+    }
+    for b in &mut scene.boundaries {
+        if let Some(points) = &mut b.points {
+            points.iter_mut().for_each(|x| *x = p(*x));
+        }
+    }
+    for d in &mut scene.dirichlet {
+        d.x = d.x.map(|x| f * x);
+        d.y = d.y.map(|y| f * y);
+        d.node = d.node.map(p);
+        d.displacement = d.displacement.map(p);
+        d.normal_displacement = d.normal_displacement.map(|u| f * u);
+    }
+    for b in &mut scene.ibm {
+        b.points.iter_mut().for_each(|x| *x = p(*x));
+        b.displacement = b.displacement.map(p);
+        b.normal_displacement = b.normal_displacement.map(|u| f * u);
+    }
+    match &mut scene.exact {
+        None => {}
+        Some(ExactSpec::ConfinedY { base, about, .. }) => {
+            *base *= f;
+            *about = p(*about);
+        }
+        Some(other) => panic!("scale_lengths: exact solution {other:?} is not scaled"),
+    }
+    scene.probes.clear();
+}

@@ -5,7 +5,6 @@
 use crate::common;
 use common::{error, run_all, sim_with};
 use mpmlab_engine::exact::elastica_tip;
-use mpmlab_engine::scene::RegionSpec;
 use mpmlab_engine::{Simulation, StepFailure};
 
 #[test]
@@ -118,28 +117,7 @@ fn load_stiffness_holds_in_any_units() {
     // the residual's (measured: 1.3e-7 at 1e-6, against 4.8e-11 and
     // 5.3e-11 as built). 1e-8 as in
     // `tangent_of_every_contribution_matches_finite_differences`.
-    let scaled = |f: f64| {
-        sim_with("cantilever-follower-pressure-finite", |s| {
-            let p = |x: [f64; 2]| [f * x[0], f * x[1]];
-            s.grid.origin = p(s.grid.origin);
-            s.grid.size = p(s.grid.size);
-            s.grid.h *= f;
-            let RegionSpec::Rectangle { min, max } = &mut s.bodies[0].region else {
-                panic!("the beam is a rectangle")
-            };
-            (*min, *max) = (p(*min), p(*max));
-            for b in &mut s.boundaries {
-                if let Some(points) = &mut b.points {
-                    points.iter_mut().for_each(|x| *x = p(*x));
-                }
-            }
-            for d in &mut s.dirichlet {
-                d.x = d.x.map(|x| f * x);
-                d.node = d.node.map(p);
-            }
-            s.probes.clear();
-        })
-    };
+    let scaled = |f: f64| sim_with("cantilever-follower-pressure-finite", |s| common::scale_lengths(s, f));
     for f in [1.0, 1e-6] {
         let e = scaled(f)
             .tangent_check(0.05)

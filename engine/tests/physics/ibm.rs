@@ -75,6 +75,35 @@ fn block_roller_stresses_at_any_inclination() {
 }
 
 #[test]
+fn block_rollers_hold_in_any_units() {
+    // C 5.1's block (mm) with every length times 1e-6 and 1e4: the same
+    // problem, whose stresses are the same and whose displacements scale.
+    // The relative errors are those of the original (C's O(delta/h) band
+    // error, delta = 1e-6 h: measured alike at every scale) and must meet
+    // the bounds of `block_roller_stresses_at_any_inclination`. Every
+    // tolerance of the implicit boundary (its nudges off a boundary on a
+    // grid line, at 0 deg, and off a cut cell's edges, at 30 deg) is
+    // relative to h, which a length taken for its inverse breaks at one of
+    // these scales.
+    for angle in [0u32, 30] {
+        for f in [1.0, 1e-6, 1e4] {
+            let mut sim = sim_with(&format!("block-roller-{angle}"), |s| common::scale_lengths(s, f));
+            let r = run_all(&mut sim);
+            let (es, eu) = (error(&r, "stress_l2"), error(&r, "displacement_l2"));
+            println!("{angle} deg, lengths x {f:e}: stress_l2 {es:.4e}, displacement_l2 {eu:.4e}");
+            assert!(es < 1e-6 && eu < 5e-8, "{angle} deg, lengths x {f:e}: {es:e} {eu:e}");
+            for s in block_frame_stress(&sim, angle as f64) {
+                let tol = 1e-3 * 13.4615;
+                assert!(
+                    (s[1] + 13.4615).abs() < tol && (s[0] + 5.7692).abs() < tol && s[2].abs() < tol,
+                    "{angle} deg, lengths x {f:e}: {s:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn delta_trade_off() {
     // C Fig. 13 / B Fig. 9: the error falls as delta/h shrinks until the
     // conditioning (growing like 1/delta) takes over.
