@@ -175,6 +175,51 @@ fn ghost_face_matrix_is_g23_with_weight_h3_over_3() {
 }
 
 #[test]
+fn every_ghost_face_is_drawn_on_the_grid_line_between_its_cells() {
+    // Each pair of neighbouring cells of a 4 x 3 grid (more columns than
+    // rows, so a row index is never taken for a column index unnoticed) as
+    // the only active cells: their one face is the grid line between them,
+    // one cell long. Origin and h are short binary fractions, so every sum
+    // is exact.
+    let grid = Grid {
+        origin: [-0.75, 1.5],
+        h: 0.25,
+        nx: 4,
+        ny: 3,
+    };
+    let fill = vec![1.0; grid.num_cells()];
+    let at = |i: usize, j: usize| [grid.origin[0] + i as f64 * grid.h, grid.origin[1] + j as f64 * grid.h];
+    let mut drawn = 0;
+    for j in 0..grid.ny {
+        for i in 0..grid.nx {
+            let c = j * grid.nx + i;
+            if i + 1 < grid.nx {
+                let faces = ghost::faces(&grid, &[c, c + 1], &fill);
+                assert_eq!(faces.len(), 1, "cells ({i}, {j}) and ({}, {j})", i + 1);
+                assert_eq!(
+                    ghost::face_segment(&grid, &faces[0]),
+                    (at(i + 1, j), at(i + 1, j + 1)),
+                    "({i}, {j}) right"
+                );
+                drawn += 1;
+            }
+            if j + 1 < grid.ny {
+                let faces = ghost::faces(&grid, &[c, c + grid.nx], &fill);
+                assert_eq!(faces.len(), 1, "cells ({i}, {j}) and ({i}, {})", j + 1);
+                assert_eq!(
+                    ghost::face_segment(&grid, &faces[0]),
+                    (at(i, j + 1), at(i + 1, j + 1)),
+                    "({i}, {j}) up"
+                );
+                drawn += 1;
+            }
+        }
+    }
+    // 3 x 3 vertical and 4 x 2 horizontal faces.
+    assert_eq!(drawn, 17);
+}
+
+#[test]
 fn ghost_faces_of_a_2x2_patch_for_smpm_and_gimp() {
     // A 2 x 2-cell body in the middle of a 4 x 4 grid (h = 0.5): all four
     // cells are active and boundary cells, Gamma is the four faces inside
