@@ -360,6 +360,18 @@ fn von_mises_collapse_runs_through_with_ghost() {
     assert!(late > 10.0 * history[9].1, "increments {late} vs {}", history[9].1);
 }
 
+/// G 2.6's domain (`translating-domain`) translated by `a` (m, h = 1 m),
+/// with `edit` applied.
+fn translating_domain(a: f64, edit: impl FnOnce(&mut mpmlab_engine::scene::Scene)) -> Simulation {
+    sim_with("translating-domain", |s| {
+        s.bodies[0].region = mpmlab_engine::scene::RegionSpec::Rectangle {
+            min: [a, 0.0],
+            max: [2.0 + a, 1.0],
+        };
+        edit(s);
+    })
+}
+
 #[test]
 fn translating_domain_conditioning() {
     // G 2.6 / Fig. 6: as the GIMP domain crosses cells, the unstabilised
@@ -372,12 +384,7 @@ fn translating_domain_conditioning() {
     let mut positions: Vec<f64> = (0..=150).map(|k| k as f64 / 100.0).collect();
     positions.extend([1e-3, 1e-5, 1e-7, 1.0 + 1e-3, 1.0 + 1e-5, 1.0 + 1e-7]);
     for (k, &a) in positions.iter().enumerate() {
-        let mut sim = sim_with("translating-domain", |s| {
-            s.bodies[0].region = mpmlab_engine::scene::RegionSpec::Rectangle {
-                min: [a, 0.0],
-                max: [2.0 + a, 1.0],
-            };
-        });
+        let mut sim = translating_domain(a, |_| {});
         let r = sim.step().unwrap_or_else(|f| panic!("a = {a}: {f}"));
         let (with, without) = (r.condition.unwrap().value, r.condition_unstabilised.unwrap().value);
         worst = (worst.0.max(with), worst.1.max(without));
@@ -409,13 +416,9 @@ fn newton_reports_the_tangents_conditioning_with_and_without_ghost() {
     // nearly singular (kappa_2 1.3e11).
     for a in [0.25, 1e-3, 1e-5] {
         let at = |kind, mode| {
-            let mut sim = sim_with("translating-domain", |s| {
+            let mut sim = translating_domain(a, |s| {
                 s.analysis.kind = kind;
                 s.analysis.condition = mode;
-                s.bodies[0].region = mpmlab_engine::scene::RegionSpec::Rectangle {
-                    min: [a, 0.0],
-                    max: [2.0 + a, 1.0],
-                };
             });
             let r = sim.step().unwrap_or_else(|f| panic!("a = {a}: {f}"));
             (r.condition.map(|c| c.value), r.condition_unstabilised.map(|c| c.value))
