@@ -814,6 +814,18 @@ fn a_time_step_moving_points_past_a_cell_is_cut_back() {
     // 0.08 m and changes the stresses at first order.
     let mut fine = flying_ghost(3.0, 0.0, duration, 2 * steps, 0);
     let fine_reports = run(&mut fine);
+    // Steps not cut back report the same increment: the largest grid speed
+    // times their dt, here less than a cell.
+    for r in &fine_reports {
+        let d = r.dynamics.as_ref().unwrap();
+        assert_eq!(r.max_increment, d.max_speed * d.dt);
+        assert!(
+            r.max_increment > 0.05 && r.max_increment < 0.1,
+            "step {}: {} m",
+            r.step,
+            r.max_increment
+        );
+    }
     let (a, b) = (cut.points(), fine.points());
     let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-12 * scale;
     let stress_scale = (0..b.len())
