@@ -1345,3 +1345,50 @@ fn roller_constraint_weights_are_exact_line_integrals() {
         }
     }
 }
+
+#[test]
+fn the_band_takes_the_elasticity_of_the_nearest_point_around_it() {
+    // Four points on a 6 x 3 grid (h = 1; more columns than rows), each
+    // with its own C (the identity times 1 to 4) and volumes 1, 1, 2, 1.
+    // A band point takes the C of the nearest material point in its own
+    // cell, else in the 3 x 3 cells around it (those inside the grid),
+    // else the volume-weighted mean (1 + 2 + 6 + 4) / 5 = 2.6.
+    use mpmlab_engine::ibm::BandMaterial;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h: 1.0,
+        nx: 6,
+        ny: 3,
+    };
+    let xs = [[0.5, 0.5], [2.5, 1.5], [3.6, 2.4], [1.95, 1.5]];
+    let vol = [1.0, 1.0, 2.0, 1.0];
+    let c = |k: f64| [[k, 0.0, 0.0], [0.0, k, 0.0], [0.0, 0.0, k]];
+    let material = BandMaterial::new(&grid, &xs, &vol, &|p| c(1.0 + p as f64));
+    for (x, want, why) in [
+        ([0.2, 0.9], 1.0, "its own cell (0, 0)"),
+        (
+            [2.05, 1.5],
+            2.0,
+            "its own cell (2, 1), though the point of (1, 1) is nearer",
+        ),
+        (
+            [2.5, 0.4],
+            2.0,
+            "cell (2, 0) is empty: the point of (2, 1), the row above",
+        ),
+        (
+            [3.5, 0.5],
+            2.0,
+            "cell (3, 0) is empty: the point of (2, 1), the column before",
+        ),
+        (
+            [4.5, 1.8],
+            3.0,
+            "cell (4, 1) is empty: the point of (3, 2), the only one around",
+        ),
+        ([5.5, 0.5], 2.6, "cell (5, 0): no point within a cell, the mean"),
+        ([-0.5, 1.0], 2.6, "outside the grid: the mean"),
+    ] {
+        assert_eq!(material.at(&grid, x), c(want), "{x:?}, {why}");
+    }
+}
