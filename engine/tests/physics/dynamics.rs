@@ -668,10 +668,11 @@ fn threads_give_the_serial_run_to_the_bit() {
 
 #[test]
 fn more_threads_than_the_work_splits_into_give_the_serial_run_to_the_bit() {
-    // Twelve threads (more than this machine's cores, and more than the
-    // eight chunks per thread the material update is split by): the
-    // collision's first ten steps equal the serial run's bit for bit. Only
-    // the work's split among threads depends on their number.
+    // Twelve threads: more than this machine's cores, and more than the
+    // chunks (of at least 1024 points) the material update splits the
+    // collision's 4828 points into. The first ten steps equal the serial
+    // run's bit for bit: only the split of the work among threads depends
+    // on their number.
     let run_with = |threads: usize| {
         let mut sim = sim_with("ghost-collision-plastic", |s| s.analysis.condition_every = 0);
         assert_eq!(sim.set_threads(threads), Ok(threads));
