@@ -1386,6 +1386,17 @@ fn the_band_takes_the_elasticity_of_the_nearest_point_around_it() {
             3.0,
             "cell (4, 1) is empty: the point of (3, 2), the only one around",
         ),
+        (
+            [2.5, 2.5],
+            2.0,
+            "cell (2, 2) is empty: the point of (2, 1), the row below",
+        ),
+        (
+            [1.2, 0.5],
+            1.0,
+            "cell (1, 0) is empty: the point of (0, 0) in its own row, \
+             nearer than that of (1, 1) above",
+        ),
         ([5.5, 0.5], 2.6, "cell (5, 0): no point within a cell, the mean"),
         ([-0.5, 1.0], 2.6, "outside the grid: the mean"),
     ] {
