@@ -762,7 +762,7 @@ impl BandMaterial {
         }
     }
 
-    /// `C` at a band point `x`.
+    /// `C` at a band point `x` (on a tie, the cell first in the grid's order).
     pub fn at(&self, grid: &Grid, x: P2) -> [[f64; 3]; 3] {
         let Some((i, j)) = grid.cell_of(x) else {
             return self.mean;

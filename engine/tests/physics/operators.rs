@@ -1347,6 +1347,31 @@ fn roller_constraint_weights_are_exact_line_integrals() {
 }
 
 #[test]
+fn a_tie_between_points_around_a_band_point_goes_to_the_cell_first_in_order() {
+    // A band point in the empty middle cell of a 3 x 3 grid (h = 1), with
+    // two points one cell away on either side, at exactly the same
+    // distance (1, exact in binary). The nearest point's C is taken; on a
+    // tie, that of the cell first in the grid's numbering (cell j nx + i:
+    // the lower row, then the left column), so the band's material does
+    // not depend on how the search happens to walk the cells around.
+    use mpmlab_engine::ibm::BandMaterial;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h: 1.0,
+        nx: 3,
+        ny: 3,
+    };
+    let c = |k: f64| [[k, 0.0, 0.0], [0.0, k, 0.0], [0.0, 0.0, k]];
+    for (xs, want, why) in [
+        ([[1.5, 2.5], [1.5, 0.5]], 2.0, "above and below: the row below"),
+        ([[2.5, 1.5], [0.5, 1.5]], 2.0, "right and left: the column to the left"),
+    ] {
+        let material = BandMaterial::new(&grid, &xs, &[1.0, 1.0], &|p| c(1.0 + p as f64));
+        assert_eq!(material.at(&grid, [1.5, 1.5]), c(want), "{xs:?}, {why}");
+    }
+}
+
+#[test]
 fn the_band_takes_the_elasticity_of_the_nearest_point_around_it() {
     // Four points on a 6 x 3 grid (h = 1; more columns than rows), each
     // with its own C (the identity times 1 to 4) and volumes 1, 1, 2, 1.
