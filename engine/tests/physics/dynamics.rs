@@ -153,53 +153,58 @@ fn a_point_leaving_the_grid_ends_the_run_where_the_whole_step_takes_it() {
     // G 5.1.1's ghost (stress-free, moving rigidly at (1, 1) m/s, which the
     // stabilised mass maps exactly) on its grid shifted by (-0.5, -0.5) m,
     // so that its GIMP domains reach the grid's right and top edges (0.5 m)
-    // after about 110 steps of dt = 5e-4 s. A point that leaves the grid
-    // leaves it at any time step, so the step is not cut back (though
-    // the scene allows cutbacks): the failure names where the whole step
-    // takes the domain's corner, and the state stays at the step's start.
-    let mut sim = sim_with("translating-ghost", |s| {
-        s.grid.origin = [-0.5, -0.5];
-        s.analysis.condition_every = 0;
-    });
-    assert!(sim.model().analysis.max_cutbacks > 0);
-    let (dt, edge, tol) = (0.5 / 1000.0, 0.5, 1e-9 * 0.03125);
-    let (failure, x, lp) = loop {
-        let (x, lp) = (sim.points().x.clone(), sim.points().lp.clone());
-        if let Err(f) = sim.step() {
-            break (f, x, lp);
-        }
-        assert!(sim.step_index() < 200, "the ghost never left the grid");
-    };
-    let StepFailure::LeftGrid {
-        step,
-        point,
-        position,
-        domain: true,
-    } = failure
-    else {
-        panic!("expected a GIMP domain leaving the grid: {failure}");
-    };
-    assert_eq!(step, sim.step_index() + 1);
-    assert!(!failure.to_string().contains("cutback"), "{failure}");
-    // The step before kept every domain inside; this one takes the
-    // reported point's past the edge, by the whole step's motion dt (1, 1).
-    let reach = |d: usize| (0..x.len()).map(|p| x[p][d] + lp[p][d]).fold(f64::MIN, f64::max);
-    assert!(reach(0) <= edge + tol && reach(1) <= edge + tol);
-    let corner = [0, 1].map(|d| {
-        let moved = x[point][d] + dt;
-        if moved + lp[point][d] > edge + tol {
-            moved + lp[point][d]
-        } else {
-            moved
-        }
-    });
-    assert!(corner != [x[point][0] + dt, x[point][1] + dt], "{corner:?}");
-    // Round-off of ~110 rigid steps (velocities exact to 1e-12, G 5.1.1).
-    assert!(
-        (position[0] - corner[0]).abs() < 1e-12 && (position[1] - corner[1]).abs() < 1e-12,
-        "reported {position:?}, the whole step gives {corner:?}"
-    );
-    assert_eq!(sim.points().x, x, "the state must stay at the step's start");
+    // after about 110 steps of dt = 5e-4 s; and, mirrored, on its own grid
+    // moving at (-1, -1) m/s, so that they reach the left and bottom edges
+    // (0 m) after about 70. A point that leaves the grid leaves it at any
+    // time step, so the step is not cut back (though the scene allows
+    // cutbacks): the failure names where the whole step takes the domain's
+    // corner, and the state stays at the step's start.
+    for (s, origin, edge) in [(1.0, -0.5, 0.5), (-1.0, 0.0, 0.0)] {
+        let mut sim = sim_with("translating-ghost", |sc| {
+            sc.grid.origin = [origin; 2];
+            sc.bodies[0].velocity = [s; 2];
+            sc.analysis.condition_every = 0;
+        });
+        assert!(sim.model().analysis.max_cutbacks > 0);
+        let (dt, tol) = (0.5 / 1000.0, 1e-9 * 0.03125);
+        let (failure, x, lp) = loop {
+            let (x, lp) = (sim.points().x.clone(), sim.points().lp.clone());
+            if let Err(f) = sim.step() {
+                break (f, x, lp);
+            }
+            assert!(sim.step_index() < 200, "the ghost never left the grid");
+        };
+        let StepFailure::LeftGrid {
+            step,
+            point,
+            position,
+            domain: true,
+        } = failure
+        else {
+            panic!("velocity {s}: expected a GIMP domain leaving the grid: {failure}");
+        };
+        assert_eq!(step, sim.step_index() + 1);
+        assert!(!failure.to_string().contains("cutback"), "{failure}");
+        // The step before kept every domain inside; this one takes the
+        // reported point's past the edge, by the whole step's motion dt (s, s).
+        let past = |x: f64, l: f64| s * x + l > s * edge + tol;
+        assert!((0..x.len()).all(|p| (0..2).all(|d| !past(x[p][d], lp[p][d]))));
+        let moved = [0, 1].map(|d| x[point][d] + s * dt);
+        let corner = [0, 1].map(|d| {
+            if past(moved[d], lp[point][d]) {
+                moved[d] + s * lp[point][d]
+            } else {
+                moved[d]
+            }
+        });
+        assert!(corner != moved, "velocity {s}: {corner:?}");
+        // Round-off of ~110 rigid steps (velocities exact to 1e-12, G 5.1.1).
+        assert!(
+            (position[0] - corner[0]).abs() < 1e-12 && (position[1] - corner[1]).abs() < 1e-12,
+            "velocity {s}: reported {position:?}, the whole step gives {corner:?}"
+        );
+        assert_eq!(sim.points().x, x, "the state must stay at the step's start");
+    }
 }
 
 #[test]
