@@ -342,3 +342,55 @@ fn derivatives_are_those_of_the_curve_they_belong_to() {
     // ellipse, never zero.
     assert!(largest[0] > 0.5 && largest[1] > 0.5, "{largest:?}");
 }
+
+#[test]
+fn every_segment_moves_at_its_span_at_its_middle() {
+    // B (11)-(12): segment k's span s_k is the positive root of
+    // (16 - |t_a + t_b|^2) s^2 + 12 (d . (t_a + t_b)) s - 36 |d|^2 = 0,
+    // with d the chord and t_a, t_b the unit tangents at its ends. With the
+    // control points a, a + s t_a / 3, b - s t_b / 3, b this says the cubic's
+    // speed at its middle is its span: C'(1/2) = 3/2 d - s/4 (t_a + t_b)
+    // (the Bezier derivative at t = 1/2, written out here from the control
+    // points), and |C'(1/2)|^2 = s^2 is that quadratic. The curves: a wiggly
+    // one and a hairpin, where the tangents lean along each chord
+    // (d . (t_a + t_b) > 0), and a short hop between two straight runs
+    // going back (B (9): a tangent next to a straight run is that run's
+    // direction), whose tangents lean against its chord (d . (t_a + t_b) < 0):
+    // the quadratic's other root formula. Both are met to round-off (1e-13
+    // of the span).
+    let curves: Vec<Vec<[f64; 2]>> = vec![
+        random_points(&[0.3, 0.9, 0.1, 0.5, 0.7, 0.2, 0.9, 0.4, 0.6, 0.8]),
+        vec![[0.0, 0.0], [1.0, 0.0], [1.0, 0.1], [0.0, 0.1], [0.0, 0.2], [1.0, 0.2]],
+        vec![[2.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.3, 0.1], [-0.7, 0.1], [-1.7, 0.1]],
+    ];
+    let (mut along, mut against) = (0, 0);
+    for q in &curves {
+        let corners = vec![false; q.len()];
+        let it = Interpolation::new(q, false, &corners).unwrap();
+        for k in 0..it.segments() {
+            let (c, s) = it.segment(k);
+            let mid = [0, 1].map(|i| 0.75 * ((c[1][i] - c[0][i]) + 2.0 * (c[2][i] - c[1][i]) + (c[3][i] - c[2][i])));
+            let ts = [0, 1].map(|i| 3.0 * (c[1][i] - c[0][i] + c[3][i] - c[2][i]) / s);
+            let lean = (c[3][0] - c[0][0]) * ts[0] + (c[3][1] - c[0][1]) * ts[1];
+            println!(
+                "{q:?} segment {k}: s {s:.6}, |C'(1/2)| {:.6}, d . (t_a + t_b) {lean:.3}",
+                mid[0].hypot(mid[1])
+            );
+            if lean >= 0.0 {
+                along += 1;
+            } else {
+                against += 1;
+            }
+            assert!(s > 0.0, "segment {k} of {q:?}: span {s}");
+            assert!(
+                (mid[0].hypot(mid[1]) - s).abs() <= 1e-13 * s,
+                "segment {k} of {q:?}: speed {} at the middle, span {s}",
+                mid[0].hypot(mid[1])
+            );
+        }
+    }
+    assert!(
+        along > 0 && against > 0,
+        "{along} segments lean along their chord, {against} against"
+    );
+}
