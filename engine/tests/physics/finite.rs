@@ -569,3 +569,90 @@ fn line_search_carries_an_increment_full_newton_cannot() {
         assert!(r.residuals.windows(2).all(|w| w[1] <= w[0]), "{:?}", r.residuals);
     }
 }
+
+#[test]
+fn follower_pressure_work_tends_to_the_strain_energy() {
+    // Clapeyron in the linear limit: the work of the pressure over the
+    // load path (the trapezoidal rule per step, between the traction on
+    // the curve at the start of the step and the one at its end) is the
+    // strain energy when the response is linear, whatever the steps. The
+    // follower-pressure cantilever at a thousandth of its load and less
+    // is nearly linear (tip deflection ~3 mm of 10 m): what remains is
+    // the trapezoidal rule on a path bent by the geometry, first order in
+    // the step and in the load. Measured over p = 0.15 to 150 Pa and 1 to
+    // 3 steps: (W - U)/U = -1.80e-5 p/n (p in Pa) to 1% below 15 Pa
+    // (-2.70e-6 at 0.15 Pa and one step; -2.70e-5 at 1.5 Pa; -8.93e-6 at
+    // 1.5 Pa in 3 steps). Tolerances: 4e-5 at 1.5 Pa in one step, and the
+    // error's 1/n and p scalings to 5% (measured 3.02 and 9.99). Smaller
+    // loads reach the round-off of the strains (~1e-9 at 1.5e-3 Pa, where
+    // Newton stalls at 1e-7 in three steps).
+    let rest = |p: f64, steps: usize| {
+        let mut sim = sim_with("cantilever-follower-pressure-finite", |s| {
+            s.boundaries[0].traction = Some(mpmlab_engine::scene::TractionSpec::Pressure { value: p });
+            s.analysis.load_steps = steps;
+        });
+        let r = run_all(&mut sim);
+        let (u, w) = (r.energy.strain, r.energy.external_work);
+        println!(
+            "p {p:e} Pa in {steps} steps: U {u:.9e} J W {w:.9e} J, (W - U)/U {:.4e}",
+            (w - u) / u
+        );
+        assert!(u > 0.0 && w.is_finite(), "p {p}, {steps} steps: U {u:e} W {w:e}");
+        (w - u) / u
+    };
+    let (one, three, smaller) = (rest(1.5, 1), rest(1.5, 3), rest(0.15, 1));
+    assert!(one.abs() < 4e-5, "{one:e}");
+    assert!((one / three - 3.0).abs() < 0.15, "one step {one:e}, three {three:e}");
+    assert!(
+        (one / smaller - 10.0).abs() < 0.5,
+        "1.5 Pa {one:e}, 0.15 Pa {smaller:e}"
+    );
+}
+
+#[test]
+fn prescribed_grid_displacement_work_is_the_strain_energy() {
+    // G 5.4's column without its weight, compressed instead in one step by
+    // its top grid line moved down 0.05 m (a roller with a prescribed
+    // normal displacement): uniaxial strain at stretch s = 0.999, nu = 0.
+    // The work is the reactions' (the trapezoidal rule on the prescribed
+    // components, the only ones that move and carry force): from none at
+    // the start to R = sigma_yy b = E ln(s)/s b at the end (Cauchy stress
+    // E ln(s)/J, J = s, on the unchanged width b), so W = -R 0.05/2 and
+    // U = E/2 ln(s)^2 b L, both in closed form (W/U - 1 = 5.0042e-4, the
+    // trapezoidal rule's). Measured: U and W to 8e-14 and 4e-14 of them
+    // (round-off); tolerances 1e-10, far below the rule's 5e-4, so that a
+    // work counted from the wrong reactions or with the wrong sign fails.
+    //
+    // Only the first step has this closed form: after it the column's top
+    // is below the grid line the condition holds, the line's later
+    // increments reach the material only through the top cell's
+    // interpolation, and the column ends shorter by less than 0.05 m
+    // (U 7e-4 low in three steps) — the reason moving boundaries here are
+    // implicit rollers on the material's curve.
+    let (e, b, l, s) = (10.0e3, 1.5625, 50.0, 0.999f64);
+    let u_exact = 0.5 * e * s.ln().powi(2) * b * l;
+    let w_exact = -0.5 * e * s.ln() / s * b * 0.05;
+    let mut sim = sim_with("column-self-weight", |sc| {
+        sc.loads.gravity = None;
+        sc.exact = None;
+        sc.analysis.load_steps = 1;
+        sc.dirichlet.push(mpmlab_engine::scene::DirichletSpec {
+            kind: mpmlab_engine::scene::DirichletKind::Roller,
+            x: None,
+            y: Some(l),
+            node: None,
+            displacement: None,
+            normal_displacement: Some(-0.05),
+        });
+    });
+    let r = run_all(&mut sim);
+    let (u, w) = (r.energy.strain, r.energy.external_work);
+    println!(
+        "U {u:.10e} J, W {w:.10e} J: relative errors {:.2e} and {:.2e}; W/U - 1 = {:.6e}",
+        (u - u_exact) / u_exact,
+        (w - w_exact) / w_exact,
+        w / u - 1.0
+    );
+    assert!(((u - u_exact) / u_exact).abs() < 1e-10, "U {u:e}, exact {u_exact:e}");
+    assert!(((w - w_exact) / w_exact).abs() < 1e-10, "W {w:e}, exact {w_exact:e}");
+}
