@@ -394,3 +394,146 @@ fn every_segment_moves_at_its_span_at_its_middle() {
         "{along} segments lean along their chord, {against} against"
     );
 }
+
+#[test]
+fn tangents_weigh_the_chords_by_the_turn_beyond_them() {
+    // B (9)-(10): at an interior point k of a curve with no straight runs
+    // the tangent is the unit vector along (1 - a) q_k + a q_(k+1), with
+    // q_j = P_j - P_(j-1) the chords and a = A1 / (A1 + A2),
+    // A1 = |q_(k-1) x q_k|, A2 = |q_(k+1) x q_(k+2)| (the turn before the
+    // chord pair weighs the far chord). Segment k leaves P_k along its
+    // control polygon's first leg (B (11): P_k1 = P_k + s t / 3), so that
+    // leg's direction is the tangent. An uneven curve (A1 != A2 everywhere,
+    // cross products of order 0.1 against chords of about 1), checked at
+    // the points with two real chords on either side; round-off of a few
+    // products: 1e-12.
+    let q = random_points(&[
+        0.3, 0.9, 0.1, 0.5, 0.7, 0.2, 0.9, 0.4, 0.6, 0.8, 0.15, 0.05, 0.5, 0.95, 0.05, 0.3, 0.8, 0.7, 0.35, 0.1, 0.6,
+        0.9, 0.2, 0.4,
+    ]);
+    let s = BSpline::interpolate(&q, false, &[]).unwrap();
+    let chord = |j: usize| [q[j][0] - q[j - 1][0], q[j][1] - q[j - 1][1]];
+    let cross = |a: [f64; 2], b: [f64; 2]| (a[0] * b[1] - a[1] * b[0]).abs();
+    let unit = |v: [f64; 2]| {
+        let l = v[0].hypot(v[1]);
+        [v[0] / l, v[1] / l]
+    };
+    let mut uneven = 0;
+    for k in 2..q.len() - 2 {
+        let (qm, q0, q1, q2) = (chord(k - 1), chord(k), chord(k + 1), chord(k + 2));
+        let (a1, a2) = (cross(qm, q0), cross(q1, q2));
+        let a = a1 / (a1 + a2);
+        if (a - 0.5).abs() > 0.05 {
+            uneven += 1;
+        }
+        let want = unit([(1.0 - a) * q0[0] + a * q1[0], (1.0 - a) * q0[1] + a * q1[1]]);
+        let c = s.segments[k];
+        let got = unit([c[1][0] - c[0][0], c[1][1] - c[0][1]]);
+        assert!(close(got, want, 1e-12), "point {k}: {got:?} vs {want:?} (a = {a})");
+    }
+    assert!(uneven >= 4, "the weights must differ from 1/2 to be tested: {uneven}");
+}
+
+#[test]
+fn corners_are_found_in_any_units_and_ignored_at_open_ends() {
+    // A square rotated by 30 deg, 3 points per side, of side 1 m and of
+    // side 10^4 (10 m in mm): the collinear chord pairs' cross products
+    // are round-off of the coordinates, which grows with the units, and the
+    // straight-run test compares them with 1e-12 times the longest chord
+    // squared, so the corners are found and the sides stay straight
+    // (|C''| at round-off of the curve's size) in both.
+    let (sn, c) = 30f64.to_radians().sin_cos();
+    for side in [1.0, 1e4] {
+        let mut q = Vec::new();
+        for (x0, y0, dx, dy) in [
+            (0.0, 0.0, 1.0, 0.0),
+            (1.0, 0.0, 0.0, 1.0),
+            (1.0, 1.0, -1.0, 0.0),
+            (0.0, 1.0, 0.0, -1.0),
+        ] {
+            for k in 0..3 {
+                let (x, y) = (x0 + dx * k as f64 / 3.0, y0 + dy * k as f64 / 3.0);
+                q.push([
+                    side * (c * x - sn * y) + 0.1 * side,
+                    side * (sn * x + c * y) + 0.3 * side,
+                ]);
+            }
+        }
+        let s = BSpline::interpolate(&q, true, &[]).unwrap();
+        for k in 0..s.segments.len() {
+            for t in [0.2, 0.5, 0.9] {
+                let d2 = s.d2(k, t);
+                assert!(d2[0].hypot(d2[1]) < 1e-11 * side, "side {side}, segment {k}: {d2:?}");
+            }
+        }
+        assert!(
+            (s.length() / (4.0 * side) - 1.0).abs() < 1e-13,
+            "side {side}: {}",
+            s.length()
+        );
+    }
+    // An open curve's ends have one tangent each (B (9) with the end
+    // chords extrapolated): marking them as corners changes nothing, while
+    // marking an interior point does.
+    let q = random_points(&[0.3, 0.9, 0.1, 0.5, 0.7, 0.2, 0.9, 0.4, 0.6, 0.8]);
+    let n = q.len();
+    let plain = BSpline::interpolate(&q, false, &vec![false; n]).unwrap();
+    let mut ends = vec![false; n];
+    ends[0] = true;
+    ends[n - 1] = true;
+    assert_eq!(BSpline::interpolate(&q, false, &ends).unwrap(), plain);
+    let mut inner = vec![false; n];
+    inner[2] = true;
+    assert_ne!(BSpline::interpolate(&q, false, &inner).unwrap(), plain);
+}
+
+#[test]
+fn the_global_parameter_runs_from_0_to_1_at_the_segments_spans() {
+    // B (12): the knots are the segments' spans s_k, summed and
+    // normalised: u_0 = 0, u_m = 1, u_(k+1) - u_k = s_k / sum s. The
+    // derivative in u is dC/dt / (u_(k+1) - u_k), and its length
+    // integrated over u in [0, 1] is the curve's length (10-point Gauss on
+    // each segment against `length`, 10-point Gauss on four quarters of
+    // each: measured 3e-12, bound 1e-9 relative). An open wiggly curve
+    // and a closed wavy loop (r = 2 + 0.3 cos 3 theta at uneven angles);
+    // the spans from the interpolation's own segments, to round-off.
+    let open = random_points(&[0.3, 0.9, 0.1, 0.5, 0.7, 0.2, 0.9, 0.4, 0.6, 0.8]);
+    let loop_: Vec<[f64; 2]> = [0.0, 0.5, 1.1, 1.6, 2.3, 2.9, 3.4, 4.0, 4.7, 5.2, 5.8]
+        .iter()
+        .map(|&t: &f64| {
+            let r = 2.0 + 0.3 * (3.0 * t).cos();
+            [r * t.cos(), r * t.sin()]
+        })
+        .collect();
+    for (q, closed) in [(open, false), (loop_, true)] {
+        let s = BSpline::interpolate(&q, closed, &[]).unwrap();
+        let corners = vec![false; q.len()];
+        let it = Interpolation::new(&q, closed, &corners).unwrap();
+        let m = s.segments.len();
+        assert_eq!(s.knots.len(), m + 1);
+        assert_eq!(s.knots[0], 0.0);
+        assert!((s.knots[m] - 1.0).abs() < 1e-15, "{:?}", s.knots);
+        let total: f64 = (0..m).map(|k| it.segment(k).1).sum();
+        let (xg, wg) = gauss_legendre(10);
+        let mut length = 0.0;
+        for k in 0..m {
+            let span = s.knots[k + 1] - s.knots[k];
+            assert!((span - it.segment(k).1 / total).abs() < 1e-14, "segment {k}: {span}");
+            for (x, w) in xg.iter().zip(&wg) {
+                let t = 0.5 * (1.0 + x);
+                let (du, d1) = (s.du(k, t), s.d1(k, t));
+                assert!(
+                    close([du[0] * span, du[1] * span], d1, 1e-13 * d1[0].hypot(d1[1])),
+                    "segment {k}"
+                );
+                length += 0.5 * w * du[0].hypot(du[1]) * span;
+            }
+        }
+        println!("closed {closed}: {:e}", length / s.length() - 1.0);
+        assert!(
+            (length / s.length() - 1.0).abs() < 1e-9,
+            "closed {closed}: {length} vs {}",
+            s.length()
+        );
+    }
+}
