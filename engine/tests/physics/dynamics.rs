@@ -719,6 +719,20 @@ velocity_centre = [0.5, 0.5]
 /// (m/s^2) along x, for `duration` s in `steps` steps, cut back at most
 /// `max_cutbacks` halvings deep.
 fn jelly(name: &str, body: &str, gx: f64, duration: f64, steps: usize, max_cutbacks: usize, mass: &str) -> Simulation {
+    jelly_under(name, body, [gx, 0.0], duration, steps, max_cutbacks, mass)
+}
+
+/// [`jelly`] under gravity `g` (m/s^2) in any direction.
+fn jelly_under(
+    name: &str,
+    body: &str,
+    g: [f64; 2],
+    duration: f64,
+    steps: usize,
+    max_cutbacks: usize,
+    mass: &str,
+) -> Simulation {
+    let (gx, gy) = (g[0], g[1]);
     let text = format!(
         r#"
 [scene]
@@ -736,7 +750,7 @@ nu = 0.3
 density = 1000.0
 {body}
 [loads]
-gravity = [{gx:?}, 0.0]
+gravity = [{gx:?}, {gy:?}]
 
 [analysis]
 kind = "explicit-dynamics"
@@ -779,8 +793,10 @@ fn a_time_step_moving_points_past_a_cell_is_cut_back() {
     let start = point_bits(&fixed);
     let failure = fixed.step().expect_err("a step of 0.15 m must fail at dt");
     println!("max_cutbacks = 0: {failure}");
+    // The message names the mass the step used (here the stabilised one).
     assert!(
-        matches!(&failure, StepFailure::Diverged { reason, .. } if reason.contains("more than a cell")),
+        matches!(&failure, StepFailure::Diverged { reason, .. } if reason.contains("more than a cell")
+            && reason.contains("the time step is too large or the stabilised mass is ill-conditioned")),
         "{failure}"
     );
     assert_eq!(fixed.step_index(), 0);
@@ -800,6 +816,10 @@ fn a_time_step_moving_points_past_a_cell_is_cut_back() {
         assert_eq!(d.dt, dt);
         assert_eq!(r.cutbacks().len(), 1, "step {}: {:?}", r.step, r.cutbacks());
         assert_eq!(d.substeps, 2);
+        // Each half moves the points 0.075-0.08 m, so some change cells and
+        // the second half maps other blocks than the first: the step did
+        // not reuse the mass pattern throughout.
+        assert!(!d.pattern_reused, "step {}", r.step);
         let c = &r.cutbacks()[0];
         assert!(c.reason.contains("more than a cell"), "{}", c.reason);
         assert!((c.to - c.from - dt).abs() < 1e-15, "{c:?}");
@@ -940,6 +960,72 @@ fn exhausted_time_step_cutbacks_fail_and_restore_the_step_start() {
 }
 
 #[test]
+fn a_late_step_exhausting_two_halvings_names_its_smallest_sub_step() {
+    // Accelerating at 30 m/s^2 in steps of 0.05 s with at most two
+    // halvings: a step moves the points more than a cell (0.1 m) from about
+    // v = 2 m/s (t = 0.07 s), its half from 4 m/s (0.13 s) and its quarter
+    // from 8 m/s (0.27 s, 1.1 m travelled: still on the 3 m grid), when the
+    // step fails with its two cutbacks: the whole step from t_n, then its
+    // first half from t_n (the quarter is not cut again). The message names
+    // the smallest sub-step tried, dt / 4, and the state is the step's start.
+    let mut sim = flying_ghost(0.0, 30.0, 2.0, 40, 2);
+    let (mut cut, mut deepest) = (0, 0);
+    let failure = loop {
+        let start = point_bits(&sim);
+        match sim.step() {
+            Ok(r) => {
+                cut += r.cutbacks().len();
+                deepest = deepest.max(r.cutbacks().len());
+            }
+            Err(f) => {
+                assert_eq!(point_bits(&sim), start, "the state is the failed step's start");
+                break f;
+            }
+        }
+        assert!(sim.step_index() < 40, "no step failed");
+    };
+    println!("{cut} cutbacks before, at most {deepest} in a step, then: {failure}");
+    let t = sim.step_index() as f64 * 0.05;
+    assert!(t > 0.2, "the failure comes after several steps: t_n = {t} s");
+    assert!(deepest >= 2, "steps were cut back twice before the failure");
+    let StepFailure::Diverged { reason, .. } = &failure else {
+        panic!("{failure}")
+    };
+    assert!(
+        reason.contains(
+            "still failing after 2 cutback(s) of the time step 5.000e-2 s (sub-steps down to 1.250e-2 s; analysis.max_cutbacks = 2)"
+        ),
+        "{reason}"
+    );
+}
+
+#[test]
+fn a_stabilised_mass_without_its_penalty_is_the_consistent_one() {
+    // G (20): M_s = M + gamma_M J_G. With gamma_M = 0 the step uses (and
+    // reports) the consistent mass; with the default rho/4 the stabilised
+    // one; the lumped mass stays lumped with or without a penalty.
+    for (mass, gamma_m, want) in [
+        (MassKind::Stabilised, Some(0.0), MassKind::Consistent),
+        (MassKind::Stabilised, None, MassKind::Stabilised),
+        (MassKind::Stabilised, Some(1e-3), MassKind::Stabilised),
+        (MassKind::Lumped, None, MassKind::Lumped),
+        (MassKind::Consistent, Some(250.0), MassKind::Consistent),
+    ] {
+        let mut sim = sim_with("ghost-collision-elastic", |s| {
+            s.analysis.mass = mass;
+            s.analysis.gamma_m = gamma_m;
+            s.analysis.condition_every = 0;
+        });
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        assert_eq!(
+            r.dynamics.as_ref().unwrap().mass,
+            want,
+            "{mass:?} with gamma_M {gamma_m:?}"
+        );
+    }
+}
+
+#[test]
 fn a_cancelled_step_is_not_cut_back() {
     // The step fails at dt (points would move 0.15 m > h) and would be cut
     // back; with the observer's stop flag set it is cancelled instead, at
@@ -979,8 +1065,14 @@ material = "jelly"
 points_per_cell = 2
 region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
 "#;
-    for mass_matrix in ["stabilised", "lumped"] {
-        let mut sim = jelly("free-fall", block, g, dt * steps as f64, steps, 0, mass_matrix);
+    // Along x and along y: each direction's body force is its own.
+    for (mass_matrix, gravity) in [
+        ("stabilised", [g, 0.0]),
+        ("lumped", [g, 0.0]),
+        ("stabilised", [0.0, g]),
+        ("lumped", [0.0, g]),
+    ] {
+        let mut sim = jelly_under("free-fall", block, gravity, dt * steps as f64, steps, 0, mass_matrix);
         let reports = run(&mut sim);
         let mass = 1000.0 * 0.4 * 0.4;
         // Round-off: a mass solve (condition below 1e3) per step, summed
@@ -994,7 +1086,7 @@ region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
             for (what, got) in [("points", r.energy.kinetic), ("grid", dyn_.kinetic_grid)] {
                 assert!(
                     (got - kinetic).abs() < 1e-10 * kinetic,
-                    "{mass_matrix}, step {n}: {what} kinetic energy {got} vs {kinetic}"
+                    "{mass_matrix}, gravity {gravity:?}, step {n}: {what} kinetic energy {got} vs {kinetic}"
                 );
             }
             assert!(
@@ -1078,4 +1170,74 @@ fn conditioning_is_measured_at_the_first_step_and_every_nth() {
             .collect();
         assert_eq!(measured, expected, "condition_every = {every}");
     }
+}
+
+#[test]
+fn explicit_points_carry_the_hencky_stress_and_domains_of_their_stretch() {
+    // The elastic ghost stretching at 1/s for 0.2 s (4 steps), GIMP: every
+    // point's Cauchy stress is the Hencky stress of its own deformation
+    // gradient F, sigma = tau / J with tau = lambda tr(e) I + 2 mu e,
+    // e = ln(F F^T) / 2 (plane strain: e_zz = 0, tau_zz = lambda tr e;
+    // elastic, so b_e = F F^T), written out here from F's eigenvalues; and
+    // its GIMP half-lengths are the initial ones times the diagonal of the
+    // right stretch U = sqrt(F^T F) (cpGIMP's domain update), by the 2 x 2
+    // closed form U = (C + sqrt(det C) I) / sqrt(tr C + 2 sqrt(det C)).
+    // Both to round-off of the incremental updates (b_e = dF b_e dF^T step
+    // by step): 1e-10 relative.
+    let mut sim = flying_ghost(0.0, 0.0, 0.2, 4, 0);
+    run(&mut sim);
+    let p = sim.points();
+    let (e, nu) = (1000.0, 0.3);
+    let (k, mu) = (e / (3.0 * (1.0 - 2.0 * nu)), e / (2.0 * (1.0 + nu)));
+    let lambda = k - 2.0 * mu / 3.0;
+    let scale = (0..p.len())
+        .flat_map(|i| p.stress[i])
+        .fold(0.0f64, |m, s| m.max(s.abs()));
+    assert!(scale > 10.0, "the ghost is stressed: {scale} Pa");
+    let mut stretched = 0.0f64;
+    for i in 0..p.len() {
+        let [f00, f01, f10, f11] = p.def_grad[i];
+        let j = f00 * f11 - f01 * f10;
+        // b = F F^T and its eigen-decomposition.
+        let (a, c, d) = (f00 * f00 + f01 * f01, f00 * f10 + f01 * f11, f10 * f10 + f11 * f11);
+        let (m, r) = (0.5 * (a + d), (0.25 * (a - d).powi(2) + c * c).sqrt());
+        let th = 0.5 * (2.0 * c).atan2(a - d);
+        let (sn, co) = th.sin_cos();
+        let (e1, e2) = (0.5 * (m + r).ln(), 0.5 * (m - r).ln());
+        let tr = e1 + e2;
+        let (t1, t2) = (lambda * tr + 2.0 * mu * e1, lambda * tr + 2.0 * mu * e2);
+        let want = [
+            (t1 * co * co + t2 * sn * sn) / j,
+            (t1 * sn * sn + t2 * co * co) / j,
+            (t1 - t2) * sn * co / j,
+        ];
+        let got = p.stress[i];
+        for q in 0..3 {
+            assert!(
+                (got[q] - want[q]).abs() < 1e-10 * scale,
+                "point {i}: {got:?} vs {want:?}"
+            );
+        }
+        assert!(
+            (p.szz[i] - lambda * tr / j).abs() < 1e-10 * scale,
+            "point {i}: s_zz {}",
+            p.szz[i]
+        );
+        // C = F^T F and U = sqrt(C).
+        let (c00, c01, c11) = (f00 * f00 + f10 * f10, f00 * f01 + f10 * f11, f01 * f01 + f11 * f11);
+        let sd = (c00 * c11 - c01 * c01).sqrt();
+        let den = (c00 + c11 + 2.0 * sd).sqrt();
+        let u = [(c00 + sd) / den, (c11 + sd) / den];
+        for q in 0..2 {
+            let want = p.lp0[i][q] * u[q];
+            assert!(
+                (p.lp[i][q] - want).abs() < 1e-10 * want,
+                "point {i}: l_p {:?} vs {want}",
+                p.lp[i]
+            );
+            stretched = stretched.max(u[q]);
+        }
+    }
+    println!("largest stretch {stretched:.4}, largest stress {scale:.3e} Pa");
+    assert!(stretched > 1.1, "the domains are stretched: {stretched}");
 }
