@@ -232,3 +232,32 @@ pub fn right_stretch(f: &Matrix2<f64>) -> Matrix2<f64> {
     let l = Matrix2::new((m + r).sqrt(), 0.0, 0.0, (m - r).max(0.0).sqrt());
     q * l * q.transpose()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::log_divided_difference;
+
+    /// `(ln x - ln y)/(x - y)` at `x = y (1 + t)` is `ln(1 + t)/(t y)`,
+    /// which `ln_1p` gives to round-off for every `t`; the series that
+    /// replaces it for |t| < 1e-4 truncates at `t^4/5 < 2e-17`, so the two
+    /// agree to a few ulps (bound 1e-15 relative), on both sides of the
+    /// switch and on both sides of `t = 0`, and at `x = y` the limit is
+    /// `1/y` exactly. A wrong series coefficient changes the result by at
+    /// least `t^3/4 ~ 1e-13` at `t = 9e-5`.
+    #[test]
+    fn log_divided_difference_is_exact_through_equal_arguments() {
+        for y in [0.37, 1.0, 2.9] {
+            assert_eq!(log_divided_difference(y, y), 1.0 / y, "x = y = {y}");
+            for t0 in [9e-5, -9e-5, 3e-5, -1e-6, 1e-9, 2e-4, -2e-4, 0.5, -0.6] {
+                let x = y * (1.0 + t0);
+                let t = x / y - 1.0;
+                let want = t.ln_1p() / (t * y);
+                let got = log_divided_difference(x, y);
+                assert!(
+                    (got - want).abs() < 1e-15 * want.abs(),
+                    "y {y}, t {t:e}: {got} vs {want}"
+                );
+            }
+        }
+    }
+}

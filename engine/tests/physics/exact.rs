@@ -88,3 +88,40 @@ fn lame_is_consistent() {
         assert!(s[1].abs() < 1e-6 * 7.56e5);
     }
 }
+
+#[test]
+fn plane_strain_out_of_plane_stress_is_lambda_times_the_trace() {
+    // Plane strain (e_zz = 0): s_zz = lambda (e_xx + e_yy) with
+    // lambda = E nu / ((1 + nu)(1 - 2 nu)), which in terms of the in-plane
+    // stresses of Hooke's law is nu (s_xx + s_yy); plane stress: 0. Checked
+    // on strains of every kind (uniaxial, biaxial, shear, mixed); exact to
+    // round-off of a few products.
+    for nu in [0.0, 0.2, 0.3, 0.45] {
+        for plane in [Plane::Strain, Plane::Stress] {
+            let m = LinearElastic {
+                e: 7.0e6,
+                nu,
+                density: 0.0,
+                plane,
+            };
+            let lambda = m.e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+            for strain in [
+                [1e-3, 0.0, 0.0],
+                [0.0, -2e-3, 0.0],
+                [0.0, 0.0, 5e-3],
+                [1e-3, 4e-3, -3e-3],
+            ] {
+                let s = mul3(&m.d_matrix(), strain);
+                let want = match plane {
+                    Plane::Strain => lambda * (strain[0] + strain[1]),
+                    Plane::Stress => 0.0,
+                };
+                let got = m.szz(s);
+                assert!(
+                    (got - want).abs() <= 1e-12 * m.e * 5e-3,
+                    "nu {nu}, {plane:?}, {strain:?}: {got} vs {want}"
+                );
+            }
+        }
+    }
+}
