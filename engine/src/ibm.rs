@@ -1377,4 +1377,107 @@ mod tests {
         let r = &reports[0];
         assert_eq!((r.cut_cells, r.violation, r.violation_rms), (0, 0.0, 0.0), "{r:?}");
     }
+
+    /// B (36) with its Tikhonov term: the fitted nodal values `a_k` (of the
+    /// nodes whose functions the fitted boundary touches) minimise
+    /// `sum_g w_g |sum_k N_k(x_g) a_k - dl u(x_g)|^2 + s sum_k |a_k - dl u(x_k)|^2`,
+    /// with 3 Gauss points per piece (`w_g` = half the piece's length times
+    /// the Gauss weight), `u` the exact field, `dl` the step's share of the
+    /// load and `s = eps` times the mean diagonal of the fit's matrix. So
+    /// the gradient, written out here from those definitions, vanishes:
+    /// `sum_g w_g N_k (u_h - dl u) + s (a_k - dl u(x_k)) = 0` for every
+    /// fitted node. A quarter of the Kirsch field's outer boundary (an arc
+    /// of chords at r = 3.3, which the grid's functions cannot reproduce),
+    /// half a load step, eps = 1e-3 (the Tikhonov term a visible share of
+    /// the balance). The solve is backward stable: the gradient is
+    /// round-off of `|M| |a|`, bound 1e-12 of the term sizes.
+    #[test]
+    fn exact_field_fit_solves_its_normal_equations() {
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            h: 0.5,
+            nx: 8,
+            ny: 8,
+        };
+        let ex = ExactSolution::Kirsch {
+            s: 1.0e6,
+            a: 0.5,
+            material: crate::material::LinearElastic {
+                e: 1.0e7,
+                nu: 0.3,
+                density: 0.0,
+                plane: crate::scene::Plane::Strain,
+            },
+        };
+        let points: Vec<P2> = (0..=6)
+            .map(|k| {
+                let t = std::f64::consts::FRAC_PI_2 * k as f64 / 6.0;
+                [3.3 * t.cos(), 3.3 * t.sin()]
+            })
+            .collect();
+        let mut b = line(&points);
+        b.side = -1.0;
+        b.exact_field = true;
+        let bs = [b];
+        let (dl, eps) = (0.5, 1e-3);
+        let nn = grid.num_nodes();
+        let mut da = vec![[f64::NAN; 2]; nn];
+        fit_exact_with(&bs, &grid, &ex, dl, eps, &mut da).unwrap();
+        // The samples, from the definitions above.
+        let (xg, wg) = gauss_legendre(3);
+        let mut samples: Vec<(Vec<(usize, f64)>, f64, P2)> = Vec::new();
+        for (a, e, _) in bs[0].pieces(&grid) {
+            let n = bs[0].normal(a, e);
+            let len = (e[0] - a[0]).hypot(e[1] - a[1]);
+            for (xi, wi) in xg.iter().zip(&wg) {
+                let t = 0.5 * (1.0 + xi);
+                let x = [a[0] + t * (e[0] - a[0]), a[1] + t * (e[1] - a[1])];
+                // The fit takes the cell on the material side of a point on
+                // a grid line: nudged 1e-9 h along the inward normal.
+                let st = grid_stencil(&grid, [x[0] + 1e-9 * grid.h * n[0], x[1] + 1e-9 * grid.h * n[1]]);
+                let nodes: Vec<(usize, f64)> = st.view().iter().map(|(k, w, _)| (k, w)).collect();
+                samples.push((nodes, 0.5 * len * wi, ex.displacement(x)));
+            }
+        }
+        let mut fitted: Vec<usize> = samples.iter().flat_map(|(n, _, _)| n.iter().map(|&(k, _)| k)).collect();
+        fitted.sort_unstable();
+        fitted.dedup();
+        // Only the fitted nodes are written.
+        for k in 0..nn {
+            assert_eq!(fitted.binary_search(&k).is_ok(), da[k][0].is_finite(), "node {k}");
+        }
+        let diag: f64 = fitted
+            .iter()
+            .map(|&k| {
+                samples
+                    .iter()
+                    .flat_map(|(n, w, _)| n.iter().filter(|e| e.0 == k).map(move |e| w * e.1 * e.1))
+                    .sum::<f64>()
+            })
+            .sum();
+        let s = eps * diag / fitted.len() as f64;
+        let (mut worst, mut size, mut tikhonov) = (0.0f64, 0.0f64, 0.0f64);
+        for &k in &fitted {
+            let mut g = [0.0; 2];
+            for (nodes, w, u) in &samples {
+                let Some(&(_, nk)) = nodes.iter().find(|e| e.0 == k) else {
+                    continue;
+                };
+                for c in 0..2 {
+                    let uh: f64 = nodes.iter().map(|&(l, nl)| nl * da[l][c]).sum();
+                    g[c] += w * nk * (uh - dl * u[c]);
+                    size = size.max((w * nk * dl * u[c]).abs());
+                }
+            }
+            let uk = ex.displacement(grid.node_position(k));
+            for c in 0..2 {
+                let t = s * (da[k][c] - dl * uk[c]);
+                tikhonov = tikhonov.max(t.abs());
+                worst = worst.max((g[c] + t).abs());
+            }
+        }
+        assert!(worst < 1e-12 * size, "gradient {worst:e} against terms of {size:e}");
+        // The Tikhonov term matters here: without it the gradient is off.
+        assert!(tikhonov > 1e3 * worst.max(1e-12 * size), "{tikhonov:e}");
+    }
 }

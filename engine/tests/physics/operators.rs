@@ -1428,3 +1428,29 @@ fn the_band_takes_the_elasticity_of_the_nearest_point_around_it() {
         assert_eq!(material.at(&grid, x), c(want), "{x:?}, {why}");
     }
 }
+
+#[test]
+fn the_nearest_point_is_nearest_in_both_directions() {
+    // Two points in one cell (h = 1), 0.8 apart along y, then along x,
+    // each with its own C (the identity times 1 and 2): a band point
+    // 0.1 from either takes that one's C. The distance is Euclidean in
+    // both coordinates: one that dropped or distorted either coordinate's
+    // difference, or compared every pair as equal (the first found), picks
+    // the far point for one of the four band points.
+    use mpmlab_engine::ibm::BandMaterial;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h: 1.0,
+        nx: 1,
+        ny: 1,
+    };
+    let c = |k: f64| [[k, 0.0, 0.0], [0.0, k, 0.0], [0.0, 0.0, k]];
+    for (xs, near_first, near_second) in [
+        ([[0.5, 0.1], [0.5, 0.9]], [0.5, 0.2], [0.5, 0.8]),
+        ([[0.1, 0.5], [0.9, 0.5]], [0.2, 0.5], [0.8, 0.5]),
+    ] {
+        let material = BandMaterial::new(&grid, &xs, &[1.0, 1.0], &|p| c(1.0 + p as f64));
+        assert_eq!(material.at(&grid, near_first), c(1.0), "{xs:?} at {near_first:?}");
+        assert_eq!(material.at(&grid, near_second), c(2.0), "{xs:?} at {near_second:?}");
+    }
+}
