@@ -89,6 +89,27 @@ fn tangent_of_every_contribution_matches_finite_differences() {
             }),
         ),
         (
+            // Points inside a band stay out of the F-bar patches (their
+            // motion is the band's, not the grid's): at delta = h/4 the
+            // 30 deg block's first rows lie in the bands. Taking them into
+            // a patch's J_bar, which the tangent leaves out, measured 2.4e-2.
+            "F-bar with points in the implicit boundaries' bands",
+            sim_with("block-roller-finite", |s| {
+                s.analysis.delta_over_h = 0.25;
+                s.analysis.fbar = true;
+            }),
+        ),
+        (
+            // GIMP domains of half-length 0.625 h (the 20 x 20 lattice of
+            // 5 mm on a 4 mm grid): each point's stencil has up to 4 x 4
+            // nodes, the most a stencil holds, in the F-bar coupling too.
+            "F-bar, GIMP domains wider than half a cell",
+            sim_with("block-roller-finite-aligned", |s| {
+                s.grid.h = 4.0;
+                s.analysis.fbar = true;
+            }),
+        ),
+        (
             "F-bar, GIMP beam with ghost",
             sim_with("elastic-beam-ghost", |s| {
                 s.grid.h = 1.0;
