@@ -56,6 +56,13 @@ fn tangent_of_every_contribution_matches_finite_differences() {
             sim_with("cantilever-follower-pressure-finite", |_| {}),
         ),
         (
+            // Every kind of block at once: points, ghost faces, band
+            // blocks and load columns, each found by its place in the
+            // step's list of blocks.
+            "follower pressure, ghost",
+            sim_with("cantilever-follower-pressure-finite", |s| s.analysis.gamma_k = 1.0e3),
+        ),
+        (
             // GIMP stencils move a boundary point by more nodes.
             "follower pressure, GIMP",
             sim_with("cantilever-follower-pressure-finite", |s| {
