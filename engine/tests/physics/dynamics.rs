@@ -3,7 +3,8 @@
 
 use crate::common;
 use common::{error, sim_with};
-use mpmlab_engine::scene::{MassKind, RegionSpec, StressUpdate, VelocityUpdate};
+use mpmlab_engine::linalg::ConditionMethod;
+use mpmlab_engine::scene::{ConditionMode, MassKind, RegionSpec, StressUpdate, VelocityUpdate};
 use mpmlab_engine::simulation::StepFailure;
 use mpmlab_engine::Simulation;
 
@@ -1240,4 +1241,43 @@ fn explicit_points_carry_the_hencky_stress_and_domains_of_their_stretch() {
     }
     println!("largest stretch {stretched:.4}, largest stress {scale:.3e} Pa");
     assert!(stretched > 1.1, "the domains are stretched: {stretched}");
+}
+
+#[test]
+fn explicit_mass_conditioning_follows_the_requested_method() {
+    // `analysis.condition`: dense eigenvalues or a Lanczos run at each end
+    // of the spectrum, whatever the size (`auto` picks by `dense_limit`).
+    // The translating ghost's masses at step 1 (a few hundred dofs, under
+    // the dense limit). The stabilised mass: each method is the one asked
+    // for, and the two agree as the column's stiffness does (Lanczos stops
+    // when the extreme Ritz values settle to 1e-10: 1e-6 relative). The
+    // consistent mass of its cut cells is not numerically positive
+    // definite (G 5.1.1), whichever method was asked for: its condition is
+    // infinite, and under the dense limit its dense eigenvalues say why,
+    // the smallest at round-off of the largest (1e-12 relative; below 0
+    // or just above).
+    let cond = |mode| {
+        let mut sim = sim_with("translating-ghost", |s| s.analysis.condition = mode);
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        r.dynamics.unwrap().conditioning.unwrap()
+    };
+    let (d, l) = (cond(ConditionMode::Dense), cond(ConditionMode::Lanczos));
+    let (ds, ls) = (&d.mass_stabilised, &l.mass_stabilised);
+    assert_eq!(
+        (ds.method, ls.method),
+        (ConditionMethod::Dense, ConditionMethod::Lanczos)
+    );
+    assert!(
+        (ds.value - ls.value).abs() < 1e-6 * ds.value,
+        "dense {:e}, Lanczos {:e}",
+        ds.value,
+        ls.value
+    );
+    for c in [&d.mass_consistent, &l.mass_consistent] {
+        assert_eq!(c.method, ConditionMethod::NotPositiveDefinite, "{c:?}");
+        assert_eq!(c.value, f64::INFINITY);
+        assert!(c.lambda_max > 0.0 && c.lambda_max.is_finite(), "{c:?}");
+        assert!(c.lambda_min.abs() < 1e-12 * c.lambda_max, "{c:?}");
+    }
+    println!("stabilised {ds:?}\nconsistent {:?}", d.mass_consistent);
 }
