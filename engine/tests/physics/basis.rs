@@ -55,9 +55,19 @@ proptest! {
         let g = grid(1.0, 0.0, 0.0);
         let lp = [lx, 0.3];
         let x = [1.0 + sx * 5.0, 1.0 + sy * 3.0];
+        let eps = 1e-6;
+        // The weights' second derivative jumps where a node is l, h - l or
+        // h + l away (h = 1 here): a central difference straddling such a
+        // kink is off by up to eps / (2 h l) = 1e-5, so points within 2 eps
+        // of one are left out (a set of measure 8 eps per node and
+        // direction; without this the check fails about once in 10^5
+        // cases, as seen in a long run of the suite).
+        let kinked = |c: f64, l: f64| {
+            (-1..=7).any(|n| [l, 1.0 - l, 1.0 + l].iter().any(|k| ((c - n as f64).abs() - k).abs() < 2.0 * eps))
+        };
+        prop_assume!(!kinked(x[0], lp[0]) && !kinked(x[1], lp[1]));
         let owned = stencil(&g, BasisKind::Gimp, x, lp);
         let s = owned.view();
-        let eps = 1e-6;
         for d in 0..2 {
             let mut xp = x; xp[d] += eps;
             let mut xm = x; xm[d] -= eps;
@@ -66,8 +76,9 @@ proptest! {
             for k in 0..s.len() {
                 let w = |st: mpmlab_engine::basis::StencilView| (0..st.len()).find(|&j| st.node(j) == s.node(k)).map_or(0.0, |j| st.w(j));
                 let fd = (w(sp.view()) - w(sm.view())) / (2.0 * eps);
-                // GIMP weights are C1 with second derivatives <= 1/(h l): the
-                // central difference error is O(eps^2 / (h l)) + round-off 1e-16/eps.
+                // GIMP weights are C1 and piecewise quadratic (second
+                // derivatives <= 1/(h l)): away from the kinks the central
+                // difference is exact but for round-off 1e-16/eps.
                 prop_assert!((fd - s.dw(k)[d]).abs() < 1e-7, "node {} dir {}: fd {} vs {}", s.node(k), d, fd, s.dw(k)[d]);
             }
         }
