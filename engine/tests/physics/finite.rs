@@ -684,3 +684,58 @@ fn prescribed_grid_displacement_work_is_the_strain_energy() {
     assert!(((u - u_exact) / u_exact).abs() < 1e-10, "U {u:e}, exact {u_exact:e}");
     assert!(((w - w_exact) / w_exact).abs() < 1e-10, "W {w:e}, exact {w_exact:e}");
 }
+
+#[test]
+fn cutbacks_halve_the_increment_from_the_last_converged_state() {
+    // G 5.2's beam in 4 load steps with Newton held to 7 iterations: steps
+    // 1 and 2 are cut back (step 2 twice), so a cut from a non-zero load
+    // factor is seen. The rule (`newton::cut_back`): the failed increment
+    // lambda_n -> lambda_(n+1) is the first cutback; then the increment is
+    // halved at each failure and doubled after an easy one, always from
+    // the last converged state and never past lambda_(n+1). So every later
+    // cutback spans Delta / 2^j (1 <= j <= max_cutbacks) of the step's
+    // Delta = 1/4 and starts on that binary grid from lambda_n (to
+    // round-off: 1e-12). With one cutback only, its first half converged
+    // and the rest (the half or, doubled, the whole, clipped at
+    // lambda_(n+1)) reached lambda_(n+1) in one more increment: two
+    // sub-steps, no zero-length sub-step at the end.
+    let mut sim = sim_with("elastic-beam-ghost", |s| {
+        s.analysis.load_steps = 4;
+        s.analysis.max_cutbacks = 4;
+        s.analysis.max_iterations = 7;
+    });
+    let delta = 0.25;
+    let mut cut_late = false;
+    while !sim.finished() {
+        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+        let s = r.solver.as_ref().unwrap();
+        let (l0, l1) = ((r.step - 1) as f64 * delta, r.step as f64 * delta);
+        let cuts: Vec<(f64, f64)> = s.cutbacks.iter().map(|c| (c.from, c.to)).collect();
+        println!("step {}: {} sub-steps, cutbacks {cuts:?}", r.step, s.substeps);
+        assert_eq!(r.load_factor, l1, "step {}", r.step);
+        let Some(&first) = cuts.first() else {
+            assert_eq!(s.substeps, 1, "step {}", r.step);
+            continue;
+        };
+        assert_eq!(first, (l0, l1), "step {}: the whole increment first", r.step);
+        cut_late |= l0 > 0.0;
+        for &(from, to) in &cuts[1..] {
+            let j = (delta / (to - from)).log2();
+            let k = (from - l0) / (to - from);
+            assert!(
+                (j - j.round()).abs() < 1e-12 && (1.0..=4.0).contains(&j.round()),
+                "step {}: {from} -> {to} is not Delta / 2^j",
+                r.step
+            );
+            assert!(
+                (k - k.round()).abs() < 1e-12 && to <= l1,
+                "step {}: {from} -> {to}",
+                r.step
+            );
+        }
+        if cuts.len() == 1 {
+            assert_eq!(s.substeps, 2, "step {}", r.step);
+        }
+    }
+    assert!(cut_late, "a step from a non-zero load factor was cut back");
+}
