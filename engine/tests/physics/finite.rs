@@ -57,10 +57,26 @@ fn tangent_of_every_contribution_matches_finite_differences() {
         ),
         (
             // Every kind of block at once: points, ghost faces, band
-            // blocks and load columns, each found by its place in the
-            // step's list of blocks.
-            "follower pressure, ghost",
-            sim_with("cantilever-follower-pressure-finite", |s| s.analysis.gamma_k = 1.0e3),
+            // blocks (a band needs delta above round-off) and load
+            // columns, each found by its place in the step's list of
+            // blocks.
+            "follower pressure, ghost, a wide band",
+            sim_with("cantilever-follower-pressure-finite", |s| {
+                s.analysis.gamma_k = 1.0e3;
+                s.analysis.delta_over_h = 0.25;
+                // An implicit roller along the beam's underside (off the
+                // grid lines), over its grid supports.
+                let other = std::fs::read_to_string(common::scene_path("slender-cantilever-finite-45")).unwrap();
+                let mut floor = mpmlab_engine::scene::Scene::parse(&other, "slender-cantilever-finite-45")
+                    .unwrap()
+                    .ibm[0]
+                    .clone();
+                floor.name = "floor".into();
+                floor.kind = mpmlab_engine::scene::DirichletKind::Roller;
+                floor.points = vec![[0.0, 0.75], [12.0, 0.75]];
+                floor.material_side = Some(mpmlab_engine::scene::MaterialSide::Left);
+                s.ibm.push(floor);
+            }),
         ),
         (
             // GIMP stencils move a boundary point by more nodes.
@@ -85,6 +101,32 @@ fn tangent_of_every_contribution_matches_finite_differences() {
                         })
                         .collect(),
                 );
+                s.boundaries.push(ring);
+            }),
+        ),
+        (
+            // Tracking points farther apart than a node's support (six on
+            // a ring of 0.75 m, h = 0.25 m): no node's column holds two of
+            // them, so each point's own segments (its k - 3 ..= k + 2) must
+            // all be in it, the wrapped ones too (a range ending at 2 k
+            // instead, which drops segments of points 0 and 1: 1.6e-6).
+            "follower pressure on a ring of points no node shares",
+            sim_with("cantilever-follower-pressure-finite", |s| {
+                s.grid.h = 0.25;
+                let mut ring = s.boundaries[0].clone();
+                ring.name = "ring".into();
+                ring.layer = None;
+                ring.closed = true;
+                ring.points = Some(
+                    (0..6)
+                        .map(|k| {
+                            let a = std::f64::consts::TAU * k as f64 / 6.0 + 0.1;
+                            [5.0 + 0.75 * a.cos(), 1.75 + 0.75 * a.sin()]
+                        })
+                        .collect(),
+                );
+                // Counter-clockwise, inside the beam on both sides: say which.
+                ring.material_side = Some(mpmlab_engine::scene::MaterialSide::Left);
                 s.boundaries.push(ring);
             }),
         ),
