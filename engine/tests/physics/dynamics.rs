@@ -1281,3 +1281,53 @@ fn explicit_mass_conditioning_follows_the_requested_method() {
     }
     println!("stabilised {ds:?}\nconsistent {:?}", d.mass_consistent);
 }
+
+#[test]
+fn explicit_cutbacks_halve_the_sub_step_where_it_failed() {
+    // The ghost accelerating at 30 m/s^2 in steps of 0.05 s, cut back at
+    // most three times: as its speed passes 2, 4 and 8 m/s, steps, their
+    // halves and then their quarters move points more than a cell, until a
+    // point leaves the 3 m grid (step 8). Each cut is recorded where it
+    // happened (`dynamics::advance`): the whole step [t_n, t_n + dt]
+    // first, then each failing half, quarter or eighth, spanning dt / 2^j
+    // (j <= max_cutbacks) and starting on that binary grid inside the
+    // step. The later parts fail first here (the ghost is faster at their
+    // start), so cuts of a second half and of a second quarter (steps 6
+    // and 7) are seen. Round-off of the times: 1e-9 of a sub-step.
+    let mut sim = flying_ghost(0.0, 30.0, 2.0, 40, 3);
+    let dt = 0.05;
+    let mut later = 0;
+    let failure = loop {
+        let r = match sim.step() {
+            Ok(r) => r,
+            Err(f) => break f,
+        };
+        let t0 = (r.step - 1) as f64 * dt;
+        let cuts: Vec<(f64, f64)> = r.cutbacks().iter().map(|c| (c.from, c.to)).collect();
+        println!("step {}: {cuts:?}", r.step);
+        let Some(&(a, b)) = cuts.first() else { continue };
+        assert!(
+            (a - t0).abs() < 1e-12 * dt && (b - t0 - dt).abs() < 1e-12 * dt,
+            "step {}: {cuts:?}",
+            r.step
+        );
+        for &(from, to) in &cuts[1..] {
+            let j = (dt / (to - from)).log2();
+            let k = (from - t0) / (to - from);
+            assert!(
+                (j - j.round()).abs() < 1e-9 && (1.0..=3.0).contains(&j.round()),
+                "step {}: {from} -> {to} is not dt / 2, dt / 4 or dt / 8",
+                r.step
+            );
+            assert!(
+                (k - k.round()).abs() < 1e-9 && from >= t0 - 1e-12 * dt && to <= t0 + dt + 1e-12 * dt,
+                "step {}: {from} -> {to} is not on dt / 2^j's grid in the step",
+                r.step
+            );
+            later += (from > t0 + 1e-12 * dt) as usize;
+        }
+        assert!(sim.step_index() < 40, "no step failed");
+    };
+    println!("{failure}");
+    assert!(later > 0, "a cut that starts past t_n was seen");
+}
