@@ -1454,3 +1454,24 @@ fn the_nearest_point_is_nearest_in_both_directions() {
         assert_eq!(material.at(&grid, near_second), c(2.0), "{xs:?} at {near_second:?}");
     }
 }
+
+#[test]
+fn the_band_looks_for_points_only_in_cells_of_the_grid() {
+    // A band point in the last column (cell (3, 0) of a 4 x 2 grid) with
+    // no point in its cell or the cells around it takes the points' mean
+    // elasticity (volume-weighted: (1 + 2)/2 here). Its ring reaches past
+    // the grid's right edge, where a column index of 4 would read as the
+    // first cell of the next row, (0, 1), which holds a point: only the
+    // grid's own cells may be searched.
+    use mpmlab_engine::ibm::BandMaterial;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h: 1.0,
+        nx: 4,
+        ny: 2,
+    };
+    let c = |k: f64| [[k, 0.0, 0.0], [0.0, k, 0.0], [0.0, 0.0, k]];
+    let xs = [[0.5, 1.5], [0.5, 0.5]];
+    let material = BandMaterial::new(&grid, &xs, &[1.0, 1.0], &|p| c(1.0 + p as f64));
+    assert_eq!(material.at(&grid, [3.5, 0.5]), c(1.5));
+}
