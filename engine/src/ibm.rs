@@ -1425,7 +1425,9 @@ mod tests {
         fit_exact_with(&bs, &grid, &ex, dl, eps, &mut da).unwrap();
         // The samples, from the definitions above.
         let (xg, wg) = gauss_legendre(3);
-        let mut samples: Vec<(Vec<(usize, f64)>, f64, P2)> = Vec::new();
+        // Per sample: its stencil's (node, weight), its weight w_g, u(x_g).
+        type Sample = (Vec<(usize, f64)>, f64, P2);
+        let mut samples: Vec<Sample> = Vec::new();
         for (a, e, _) in bs[0].pieces(&grid) {
             let n = bs[0].normal(a, e);
             let len = (e[0] - a[0]).hypot(e[1] - a[1]);
