@@ -1102,6 +1102,15 @@ region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
                 dyn_.energy_error
             );
         }
+        // The energies do not see the direction: every point moves at
+        // n g dt along g itself (same round-off).
+        let v = [0, 1].map(|d| gravity[d] * dt * steps as f64);
+        for (i, got) in sim.points().v.iter().enumerate() {
+            assert!(
+                (0..2).all(|d| (got[d] - v[d]).abs() < 1e-10 * g * dt * steps as f64),
+                "{mass_matrix}, gravity {gravity:?}, point {i}: v {got:?} vs {v:?}"
+            );
+        }
     }
 }
 
