@@ -107,3 +107,23 @@ pub fn scale_lengths(scene: &mut Scene, f: f64) {
     }
     scene.probes.clear();
 }
+
+/// A cutback's sub-increment `part = (from, to)` of the increment
+/// `whole = (start, size)` (load factor or time): it spans `size / 2^j`
+/// with `1 <= j <= max_depth`, starts on that binary grid from `start`
+/// (both to `tol`, relative to the part) and stays inside the increment
+/// (to round-off, 1e-12 of `size`). Halving from the last good state
+/// gives nothing else.
+pub fn assert_binary_part(part: (f64, f64), whole: (f64, f64), max_depth: usize, tol: f64, what: &str) {
+    let ((from, to), (start, size)) = (part, whole);
+    let j = (size / (to - from)).log2();
+    let k = (from - start) / (to - from);
+    assert!(
+        (j - j.round()).abs() < tol && (1.0..=max_depth as f64).contains(&j.round()),
+        "{what}: {from} -> {to} is not {size} / 2^j, j <= {max_depth}"
+    );
+    assert!(
+        (k - k.round()).abs() < tol && from >= start - 1e-12 * size && to <= start + size + 1e-12 * size,
+        "{what}: {from} -> {to} is not on {size} / 2^j's grid from {start}"
+    );
+}

@@ -1321,18 +1321,7 @@ fn explicit_cutbacks_halve_the_sub_step_where_it_failed() {
             r.step
         );
         for &(from, to) in &cuts[1..] {
-            let j = (dt / (to - from)).log2();
-            let k = (from - t0) / (to - from);
-            assert!(
-                (j - j.round()).abs() < 1e-9 && (1.0..=3.0).contains(&j.round()),
-                "step {}: {from} -> {to} is not dt / 2, dt / 4 or dt / 8",
-                r.step
-            );
-            assert!(
-                (k - k.round()).abs() < 1e-9 && from >= t0 - 1e-12 * dt && to <= t0 + dt + 1e-12 * dt,
-                "step {}: {from} -> {to} is not on dt / 2^j's grid in the step",
-                r.step
-            );
+            common::assert_binary_part((from, to), (t0, dt), 3, 1e-9, &format!("step {}", r.step));
             later += (from > t0 + 1e-12 * dt) as usize;
         }
         assert!(sim.step_index() < 40, "no step failed");
