@@ -1329,3 +1329,182 @@ fn explicit_cutbacks_halve_the_sub_step_where_it_failed() {
     println!("{failure}");
     assert!(later > 0, "a cut that starts past t_n was seen");
 }
+
+/// The ghost of [`flying_ghost`] without its velocity gradient: every
+/// point at `speed` m/s along x, accelerated by `gx` m/s^2, in steps of
+/// 0.05 s, cut back at most `max_cutbacks` halvings deep.
+fn translating_ghost(speed: f64, gx: f64, max_cutbacks: usize) -> Simulation {
+    let body = format!(
+        r#"
+[[body]]
+name = "ghost"
+material = "jelly"
+points_per_cell = 1
+basis = "gimp"
+placement = "lattice"
+lattice = [31, 31]
+region = {{ shape = "ghost", min = [0.3, 0.3], size = 0.4 }}
+velocity = [{speed:?}, 0.0]
+"#
+    );
+    jelly("translating-ghost", &body, gx, 0.5, 10, max_cutbacks, "stabilised")
+}
+
+#[test]
+fn a_failing_second_quarter_is_cut_back_no_deeper_than_allowed() {
+    // The ghost starting at rest under 200 m/s^2 along x (h = 0.1 m, dt =
+    // 0.05 s): a sub-step of dt / 2^j ending at speed u moves the points
+    // u dt / 2^j (the stabilised mass reproduces a uniform velocity), and
+    // u = 10 tau m/s at the fraction tau of the step. The whole step moves
+    // them 0.5 m, each half 0.125 m and 0.25 m: all more than a cell, all
+    // cut. The first half's quarters move them 0.031 m and 0.063 m; the
+    // second half's 0.094 m (third quarter) and 0.125 m (fourth): the
+    // fourth fails once more, two halvings deep; its eighths move them
+    // 0.055 m and 0.063 m. Margins: 6% of a cell at the tightest, far
+    // beyond the ghost's round-off. So:
+    // - max_cutbacks = 2: the fourth quarter, two halvings deep already,
+    //   is not cut again, and the step fails with the state at its start
+    //   (`dynamics::advance` passes depth + 1 to both halves of a part);
+    // - max_cutbacks = 3: the step is the first half's two quarters, the
+    //   third quarter and the fourth quarter's two eighths, cut at the
+    //   whole step, its halves and the fourth quarter.
+    let dt = 0.05;
+    let mut shallow = translating_ghost(0.0, 200.0, 2);
+    let start = point_bits(&shallow);
+    let failure = shallow
+        .step()
+        .expect_err("the fourth quarter must fail and may not be cut");
+    println!("max_cutbacks = 2: {failure}");
+    // Three cutbacks recorded (the whole step and its halves): the failing
+    // fourth quarter is not cut, so the smallest sub-step tried is dt / 4.
+    assert!(
+        matches!(&failure, StepFailure::Diverged { reason, .. }
+            if reason.contains("more than a cell")
+                && reason.contains("still failing after 3 cutback(s) of the time step 5.000e-2 s (sub-steps down to 1.250e-2 s")),
+        "{failure}"
+    );
+    assert_eq!(shallow.step_index(), 0);
+    assert_eq!(point_bits(&shallow), start);
+
+    let mut deep = translating_ghost(0.0, 200.0, 3);
+    let r = deep.step().unwrap_or_else(|f| panic!("max_cutbacks = 3: {f}"));
+    let cuts: Vec<(f64, f64)> = r.cutbacks().iter().map(|c| (c.from, c.to)).collect();
+    println!("max_cutbacks = 3: {cuts:?}");
+    // 1e-12 of dt: round-off of t + dt / 2^j (0.05 is not binary).
+    let want = [(0.0, 1.0), (0.0, 0.5), (0.5, 1.0), (0.75, 1.0)];
+    assert_eq!(cuts.len(), want.len(), "{cuts:?}");
+    for (&(a, b), (wa, wb)) in cuts.iter().zip(want) {
+        assert!(
+            (a - wa * dt).abs() < 1e-12 * dt && (b - wb * dt).abs() < 1e-12 * dt,
+            "{cuts:?}"
+        );
+    }
+    assert_eq!(r.dynamics.as_ref().unwrap().substeps, 5);
+    // The ghost's speed after the step: g dt, as for a step not cut.
+    let v = &deep.points().v;
+    // 1e-9 m/s: round-off of FLIP's increments over five sub-steps.
+    assert!(
+        v.iter().all(|v| (v[0] - 10.0).abs() < 1e-9 && v[1].abs() < 1e-9),
+        "{:?}",
+        v[0]
+    );
+}
+
+#[test]
+fn a_step_cut_back_inside_its_cells_reuses_the_mass_pattern() {
+    // A block of 2 x 2 points in the middle of one cell, expanding at
+    // L = 12 I 1/s about its centre (no translation), standard basis: the
+    // stabilised mass of one cell's four points reproduces that linear
+    // field exactly, so the whole step's deformation increment is dF =
+    // I + 12 dt I, |dF - I| = 12 sqrt(2) dt = 0.85 for dt = 0.05 s, more
+    // than the explicit guard's 1/2 (the step's first attempt reports
+    // it); its halves deform the block less than that (0.42 for the
+    // first). The points start 0.025 m from the centre in each direction,
+    // a quarter cell inside their cell, and stay in it (the test checks
+    // where they end): no point changes cell, so every attempt of the step maps the
+    // same blocks. The failed whole step factorises the pattern, both
+    // halves reuse it, and the step reports the pattern reused
+    // (`dynamics::Merged::add`: reused only if every sub-step reused it).
+    let body = r#"
+[[body]]
+name = "block"
+material = "jelly"
+points_per_cell = 1
+placement = "lattice"
+lattice = [2, 2]
+region = { shape = "rectangle", min = [0.3, 0.3], max = [0.4, 0.4] }
+velocity_gradient = [[12.0, 0.0], [0.0, 12.0]]
+velocity_centre = [0.35, 0.35]
+"#;
+    let mut sim = jelly("expanding-block", body, 0.0, 0.5, 10, 2, "stabilised");
+    let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+    println!("{:?}", r.cutbacks());
+    assert_eq!(r.cutbacks().len(), 1, "{:?}", r.cutbacks());
+    assert!(
+        r.cutbacks()[0].reason.contains("deform by |dF - I| = 8.485e-1"),
+        "{}",
+        r.cutbacks()[0].reason
+    );
+    let d = r.dynamics.as_ref().unwrap();
+    assert_eq!(d.substeps, 2);
+    let x = &sim.points().x;
+    assert!(x.iter().flatten().all(|&c| c > 0.3 && c < 0.4), "{x:?}");
+    assert!(d.pattern_reused, "every attempt mapped the same cell");
+}
+
+#[test]
+fn a_step_whose_middle_sub_step_changes_cells_does_not_reuse_the_mass_pattern() {
+    // A 2 x 2 block of points 0.01 m apart (x = 0.329, 0.339 m in the cell
+    // [0.3, 0.4]) at 8 m/s along x, braked at 110 m/s^2 (h = 0.1 m, dt =
+    // 0.05 s, consistent mass: the grid reproduces a uniform velocity).
+    // A sub-step of dt / 2^j ending at speed u moves the points u dt / 2^j,
+    // with u = 8 - 5.5 tau m/s at the fraction tau of the step: the whole
+    // step 0.125 m and its first half 0.131 m, more than a cell, both cut;
+    // the first half's quarters 0.083 m and 0.066 m, the second half
+    // 0.063 m. Each sub-step maps the points where it starts: the first
+    // quarter in the first cell (the failed attempts' pattern: reused),
+    // the second quarter in the next cell ([0.41, 0.42] m: a new pattern),
+    // the second half still there ([0.48, 0.49] m: reused). Margins: 0.012
+    // m from the cells' edges. The step reused the pattern only if every
+    // sub-step did (`dynamics::Merged::add`): not here, though its first
+    // and last sub-steps did.
+    let body = r#"
+[[body]]
+name = "block"
+material = "jelly"
+points_per_cell = 1
+placement = "lattice"
+lattice = [2, 2]
+region = { shape = "rectangle", min = [0.324, 0.34], max = [0.344, 0.36] }
+velocity = [8.0, 0.0]
+"#;
+    let dt = 0.05;
+    let mut sim = jelly("braked-block", body, -110.0, 0.5, 10, 2, "consistent");
+    let x0: Vec<f64> = sim.points().x.iter().map(|x| x[0]).collect();
+    assert!(
+        x0.iter()
+            .all(|&x| (x - 0.329).abs() < 1e-12 || (x - 0.339).abs() < 1e-12),
+        "{x0:?}"
+    );
+    let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+    let cuts: Vec<(f64, f64)> = r.cutbacks().iter().map(|c| (c.from, c.to)).collect();
+    println!("{cuts:?}");
+    // 1e-12 of dt: round-off of t + dt / 2^j.
+    let want = [(0.0, 1.0), (0.0, 0.5)];
+    assert_eq!(cuts.len(), want.len(), "{cuts:?}");
+    for (&(a, b), (wa, wb)) in cuts.iter().zip(want) {
+        assert!(
+            (a - wa * dt).abs() < 1e-12 * dt && (b - wb * dt).abs() < 1e-12 * dt,
+            "{cuts:?}"
+        );
+    }
+    let d = r.dynamics.as_ref().unwrap();
+    assert_eq!(d.substeps, 3);
+    // Where the step leaves the points: 0.0828 + 0.0656 + 0.0625 m on.
+    // 1e-9 m: round-off of three sub-steps.
+    let moved = 0.025 * 2.5 + 0.0125 * (6.625 + 5.25);
+    for (x, x0) in sim.points().x.iter().zip(&x0) {
+        assert!((x[0] - x0 - moved).abs() < 1e-9, "{} from {x0}", x[0]);
+    }
+    assert!(!d.pattern_reused, "the second quarter mapped a new cell");
+}
