@@ -1508,3 +1508,82 @@ velocity = [8.0, 0.0]
     }
     assert!(!d.pattern_reused, "the second quarter mapped a new cell");
 }
+
+#[test]
+fn a_gimp_domain_a_ten_thousandth_of_a_millimetre_cell_past_the_edge_has_left_the_grid() {
+    // Two GIMP points (l_p = h / 2) tiling the right half of a grid of 1 mm
+    // cells: the right one's domain ends on the grid's edge (x = 4 mm). In
+    // one explicit step of 1e-4 s at speed v along x (stress-free, a uniform
+    // velocity the lumped mass reproduces) the domain ends v 1e-4 m
+    // past the edge. The edge's tolerance is round-off of the cell (1e-9
+    // h, `dynamics::gimp_domains_inside`): a domain past it by 1e-10 h
+    // stays in the grid, one past it by 1e-4 h (0.1 um) has left it, in
+    // millimetres as in metres.
+    let run = |past: f64| {
+        let h = 1e-3;
+        let dt = 1e-4;
+        let text = format!(
+            r#"
+[scene]
+name = "millimetre-edge"
+
+[grid]
+origin = [0.0, 0.0]
+size = [0.004, 0.002]
+h = {h:?}
+
+[[material]]
+name = "jelly"
+E = 1000.0
+nu = 0.3
+density = 1000.0
+
+[[body]]
+name = "pair"
+material = "jelly"
+points_per_cell = 1
+basis = "gimp"
+placement = "lattice"
+lattice = [2, 1]
+region = {{ shape = "rectangle", min = [0.002, 0.0005], max = [0.004, 0.0015] }}
+velocity = [{v:?}, 0.0]
+
+[analysis]
+kind = "explicit-dynamics"
+duration = {dt:?}
+load_steps = 1
+mass = "lumped"
+condition_every = 0
+"#,
+            v = past * h / dt
+        );
+        let mut sim = Simulation::new(
+            mpmlab_engine::Model::from_text(&text, "millimetre-edge.toml").unwrap_or_else(|e| panic!("{e}")),
+        );
+        let p = sim.points();
+        let right = (0..p.len()).max_by(|&a, &b| p.x[a][0].total_cmp(&p.x[b][0])).unwrap();
+        // The domain ends on the edge to round-off of 4 mm (1e-18 m).
+        assert!(
+            (p.x[right][0] + p.lp[right][0] - 0.004).abs() < 1e-15,
+            "{:?}",
+            p.x[right]
+        );
+        (sim.step(), right)
+    };
+    let (inside, _) = run(1e-10);
+    inside.unwrap_or_else(|f| panic!("a domain 1e-10 h past the edge is on it: {f}"));
+    let (outside, right) = run(1e-4);
+    match outside {
+        Err(StepFailure::LeftGrid {
+            step: 1,
+            point,
+            position,
+            domain: true,
+        }) => {
+            assert_eq!(point, right);
+            // Its domain's corner: 0.1 um past the edge (round-off 1e-15 m).
+            assert!((position[0] - 0.004 - 1e-7).abs() < 1e-15, "{position:?}");
+        }
+        other => panic!("a domain 1e-4 h past the edge must leave the grid: {other:?}"),
+    }
+}
