@@ -1339,4 +1339,27 @@ mass = "stabilised"
             );
         }
     }
+
+    /// The power iteration of the CFL numbers: for `K = diag(3, 2)`, `M =
+    /// diag(1, 4)` the largest eigenvalue of `K x = lambda M x` is 3 (the
+    /// iteration settles to 1e-8 relative; 1e-6 leaves room). A mass with
+    /// `x.Mx <= 0` (`M = -I`, whose "eigenvalue" with `K = I` would be -1)
+    /// has no stable explicit step: infinite `lambda_max`, CFL number 0.
+    #[test]
+    fn generalised_lambda_max_is_infinite_for_a_mass_that_is_not_positive() {
+        use faer::sparse::{SparseColMat, Triplet};
+        let diag = |d: [f64; 2]| {
+            let t = [Triplet::new(0, 0, d[0]), Triplet::new(1, 1, d[1])];
+            SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(2, 2, &t).unwrap()
+        };
+        let mul = |d: [f64; 2]| move |x: &[f64]| vec![d[0] * x[0], d[1] * x[1]];
+        let solve = |d: [f64; 2]| move |b: &[f64]| vec![b[0] / d[0], b[1] / d[1]];
+        let k = diag([3.0, 2.0]);
+        let lambda = generalised_lambda_max(k.as_ref(), mul([1.0, 4.0]), solve([1.0, 4.0]));
+        assert!((lambda - 3.0).abs() < 1e-6 * 3.0, "{lambda}");
+        let k = diag([1.0, 1.0]);
+        let lambda = generalised_lambda_max(k.as_ref(), mul([-1.0, -1.0]), solve([-1.0, -1.0]));
+        assert_eq!(lambda, f64::INFINITY);
+        assert_eq!(cfl(1.0, lambda), Some(0.0));
+    }
 }
