@@ -616,6 +616,36 @@ fn shared_node_reactions_split_along_the_constraints() {
 }
 
 #[test]
+fn reaction_split_of_nearly_parallel_rollers_is_the_same_in_any_unit_of_length() {
+    // Two rollers 0.01 rad apart about 45 deg share a node: M = W_1 + W_2
+    // has det M = w^2 sin^2(0.01), 2.5e-5 of (tr M)^2, far above the
+    // rank-one threshold 1e-10 (tr M)^2, so r = 3 n1 + 2 n2 splits
+    // exactly along the normals (`ibm::split_reaction`). The weights are
+    // integrals along the boundary (m): in millimetres or micrometres they
+    // are 1e3 or 1e6 times larger, and the split must not change. M's
+    // condition is ~1e4: 1e-9 of the shares' size leaves room for its
+    // round-off.
+    use mpmlab_engine::ibm::split_reaction;
+    let at = |deg: f64, d: f64| {
+        let a = deg.to_radians() + d;
+        [a.cos(), a.sin()]
+    };
+    let (n1, n2) = (at(45.0, 0.005), at(45.0, -0.005));
+    let outer = |n: [f64; 2], w: f64| [[w * n[0] * n[0], w * n[0] * n[1]], [w * n[1] * n[0], w * n[1] * n[1]]];
+    let r = [3.0 * n1[0] + 2.0 * n2[0], 3.0 * n1[1] + 2.0 * n2[1]];
+    for unit in [1.0, 1e3, 1e6] {
+        let s = split_reaction(r, &[outer(n1, 0.4 * unit), outer(n2, 0.6 * unit)], [0.0; 2]);
+        let want = [[3.0 * n1[0], 3.0 * n1[1]], [2.0 * n2[0], 2.0 * n2[1]]];
+        for (s, w) in s.iter().zip(want) {
+            assert!(
+                (s[0] - w[0]).abs() < 1e-9 && (s[1] - w[1]).abs() < 1e-9,
+                "weights x {unit}: {s:?}, want {w:?}"
+            );
+        }
+    }
+}
+
+#[test]
 fn plate_hole_dirichlet_reaction_is_the_kirsch_resultant() {
     // B 4.4.2: the outer boundary holds the Kirsch field, so its reaction
     // on the plate is the resultant of the exact traction over it, which
@@ -988,6 +1018,21 @@ fn block_roller_finite_at_30_degrees() {
     let first = finite_block(&mut sim, 30.0);
     assert!(first[0].0 < 1e-5, "{first:?}");
     assert!(first[0].1.abs() < 1e-5, "{first:?}");
+    // Every point is where the exact map takes it, those in the platen's
+    // cut cells outside its band too (moved by `S d + S d^a`, the platen's
+    // 1 mm along its normal in d^a): measured 1.9e-8 mm at worst (the band
+    // and Newton's tolerance); the bound is 1e-5 of the platen's motion, as
+    // for the stresses.
+    let exact = sim.model().exact.clone().unwrap();
+    let pts = sim.points();
+    let worst = (0..pts.len())
+        .map(|p| {
+            let u = exact.fields(pts.x0[p], 1.0).1;
+            (pts.x[p][0] - pts.x0[p][0] - u[0]).hypot(pts.x[p][1] - pts.x0[p][1] - u[1])
+        })
+        .fold(0.0f64, f64::max);
+    println!("largest point position error {worst:.2e} mm");
+    assert!(worst < 1e-5, "{worst:e} mm");
     let mut sim = sim_with("block-roller-finite", |_| {});
     finite_block(&mut sim, 30.0);
 }
