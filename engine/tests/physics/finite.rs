@@ -767,6 +767,15 @@ fn cutbacks_halve_the_increment_from_the_last_converged_state() {
             continue;
         };
         assert_eq!(first, (l0, l1), "step {}: the whole increment first", r.step);
+        // The step's Newton iterations are those of its converged
+        // sub-steps: each took at least one (its load moved) and at most 7.
+        assert!(
+            (s.substeps..=7 * s.substeps).contains(&r.iterations),
+            "step {}: {} iterations in {} sub-steps",
+            r.step,
+            r.iterations,
+            s.substeps
+        );
         cut_late |= l0 > 0.0;
         for &(from, to) in &cuts[1..] {
             common::assert_binary_part((from, to), (l0, delta), 4, 1e-12, &format!("step {}", r.step));
