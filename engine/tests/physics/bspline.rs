@@ -435,6 +435,36 @@ fn tangents_weigh_the_chords_by_the_turn_beyond_them() {
 }
 
 #[test]
+fn a_straight_run_leaves_along_itself_into_a_curve() {
+    // B (9)-(10) where a straight run meets a curve: at its last point
+    // P_2 = (2, 0) the turn before (A1 = |q_1 x q_2| = 0) is none, the
+    // turn after is A2 = 0.75, so a = A1 / (A1 + A2) = 0 and the tangent
+    // is the run's own chord: the curve leaves the run along it, with no
+    // kink or overshoot. Read backwards the same point has A2 = 0 and
+    // a = 1: the tangent is the far chord, the run again. Round-off: 1e-12.
+    let q = vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.5], [3.5, 1.5], [3.6, 2.6]];
+    let unit = |v: [f64; 2]| {
+        let l = v[0].hypot(v[1]);
+        [v[0] / l, v[1] / l]
+    };
+    for (points, k, along) in [
+        (q.clone(), 2, [1.0, 0.0]),
+        (q.iter().rev().copied().collect(), 3, [-1.0, 0.0]),
+    ] {
+        let s = BSpline::interpolate(&points, false, &[]).unwrap();
+        let (arrive, leave) = (s.segments[k - 1], s.segments[k]);
+        let t_in = unit([arrive[3][0] - arrive[2][0], arrive[3][1] - arrive[2][1]]);
+        let t_out = unit([leave[1][0] - leave[0][0], leave[1][1] - leave[0][1]]);
+        for t in [t_in, t_out] {
+            assert!(
+                close(t, along, 1e-12),
+                "point {k}: tangent {t:?}, the run goes {along:?}"
+            );
+        }
+    }
+}
+
+#[test]
 fn corners_are_found_in_any_units_and_ignored_at_open_ends() {
     // A square rotated by 30 deg, 3 points per side, of side 1 m and of
     // side 10^4 (10 m in mm): the collinear chord pairs' cross products
