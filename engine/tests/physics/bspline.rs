@@ -176,6 +176,34 @@ fn corners_keep_the_sides_of_a_square_straight() {
 }
 
 #[test]
+fn signed_area_is_positive_counter_clockwise_and_scales_with_the_square() {
+    // The square of the test above with side 2 (corners detected, sides
+    // straight): Green's theorem on the curve gives 4 counter-clockwise
+    // and -4 read clockwise (the quadrature is exact on cubics; round-off
+    // 1e-13 of the area).
+    let side = 2.0;
+    let mut q = Vec::new();
+    for (x0, y0, dx, dy) in [
+        (0.0, 0.0, 1.0, 0.0),
+        (1.0, 0.0, 0.0, 1.0),
+        (1.0, 1.0, -1.0, 0.0),
+        (0.0, 1.0, 0.0, -1.0),
+    ] {
+        for k in 0..3 {
+            let f = k as f64 / 3.0;
+            q.push([side * (x0 + dx * f), side * (y0 + dy * f)]);
+        }
+    }
+    let ccw = BSpline::interpolate(&q, true, &[]).unwrap();
+    q.reverse();
+    let cw = BSpline::interpolate(&q, true, &[]).unwrap();
+    for (s, want) in [(ccw, 4.0), (cw, -4.0)] {
+        let a = s.signed_area();
+        assert!((a - want).abs() < 1e-13 * 4.0, "{a}, want {want}");
+    }
+}
+
+#[test]
 fn circle_converges() {
     // Points on the unit circle: the largest radial error falls by at least
     // 2^3 per halving of the spacing (local cubic interpolation with
