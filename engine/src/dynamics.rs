@@ -1362,4 +1362,28 @@ mass = "stabilised"
         assert_eq!(lambda, f64::INFINITY);
         assert_eq!(cfl(1.0, lambda), Some(0.0));
     }
+
+    /// A Rayleigh quotient at or below zero stops the power iteration only
+    /// where `K x = 0` (a stress-free mode, lambda_max 0). For an indefinite
+    /// `K = diag(-1, c)` (M = I) arranged so that the iteration's fixed
+    /// start `x` has `x.Kx < 0`, the dominant eigenvalue `c > 1` is still
+    /// found (to the iteration's 1e-8; 1e-6 leaves room).
+    #[test]
+    fn generalised_lambda_max_goes_on_past_a_negative_start() {
+        use faer::sparse::{SparseColMat, Triplet};
+        // The start `generalised_lambda_max` draws.
+        let mut rand = crate::linalg::XorShift::new(0x2545_f491_4f6c_dd1d);
+        let (a, b) = (rand.centred(), rand.centred());
+        // The larger start component on the negative eigenvalue -1, the
+        // other on c, halfway between 1 and the ratio that keeps x.Kx < 0.
+        let (big, small, first) = if a.abs() >= b.abs() { (a, b, 0) } else { (b, a, 1) };
+        let c = 0.5 * (1.0 + (big / small).powi(2));
+        let mut d = [c; 2];
+        d[first] = -1.0;
+        assert!(d[0] * a * a + d[1] * b * b < 0.0 && c > 1.0);
+        let t = [Triplet::new(0, 0, d[0]), Triplet::new(1, 1, d[1])];
+        let k = SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(2, 2, &t).unwrap();
+        let lambda = generalised_lambda_max(k.as_ref(), |x: &[f64]| x.to_vec(), |b: &[f64]| b.to_vec());
+        assert!((lambda - c).abs() < 1e-6 * c, "{lambda}, want {c}");
+    }
 }

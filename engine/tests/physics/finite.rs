@@ -736,93 +736,98 @@ fn prescribed_grid_displacement_work_is_the_strain_energy() {
 
 #[test]
 fn cutback_sizes_follow_each_sub_steps_newton_iterations() {
-    // The rule of `newton::cut_back`, replayed from what the step did: each
-    // Newton attempt of a step starts at iteration 0 of the progress hook
-    // and ends converged (relative residual at or below the tolerance) or
-    // not (7 iterations, the limit here). The whole increment fails first;
-    // then from lambda_n with Delta / 2 at depth 1: a failed attempt halves
-    // the size (depth + 1); a converged one moves on and doubles the size
-    // (depth - 1) if it took at most half the limit (2 its <= 7) and the
-    // depth is above 0; an attempt reaching lambda_(n+1) (to 1e-12 Delta)
-    // lands on it and ends the step. The failures the replay predicts must
-    // be the step's recorded cutbacks, and its converged attempts the
-    // step's sub-steps. G 5.2's beam in 4 steps (as the test below): step 2
-    // has a converged sub-step that took more than half the limit, so its
-    // successor keeps its size.
+    // The rule of `newton::cut_back`, replayed from what each step did:
+    // each Newton attempt of a step starts at iteration 0 of the progress
+    // hook and ends converged (relative residual at or below the
+    // tolerance) or not (the iteration limit). The whole increment fails
+    // first; then from lambda_n with Delta / 2 at depth 1: a failed attempt
+    // halves the size (depth + 1); a converged one moves on and doubles the
+    // size (depth - 1) if it took at most half the limit (2 its <= limit)
+    // and the depth is above 0; an attempt reaching lambda_(n+1) (to
+    // 1e-12 Delta) lands on it and ends the step. The failures the replay
+    // predicts must be the step's recorded cutbacks, and its converged
+    // attempts the step's sub-steps. G 5.2's beam in 4 steps held to 7
+    // iterations (as the test below: a converged sub-step above half the
+    // limit keeps the size for the next) and in 2 steps held to 8 (a
+    // sub-step of 4 iterations, inside a cut step, doubles the next).
     use std::sync::{Arc, Mutex};
-    let mut sim = sim_with("elastic-beam-ghost", |s| {
-        s.analysis.load_steps = 4;
-        s.analysis.max_cutbacks = 4;
-        s.analysis.max_iterations = 7;
-    });
-    let (tol, max) = (sim.params().tolerance, sim.params().max_iterations);
-    let log: Arc<Mutex<Vec<(usize, f64)>>> = Arc::default();
-    let sink = log.clone();
-    sim.set_progress(Some(Box::new(move |p| {
-        sink.lock().unwrap().push((p.iteration, p.residual));
-        true
-    })));
-    let delta = 0.25;
-    let mut kept = false;
-    while !sim.finished() {
-        log.lock().unwrap().clear();
-        let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
-        let s = r.solver.as_ref().unwrap();
-        // The step's attempts: (iterations, converged).
-        let mut attempts: Vec<(usize, bool)> = Vec::new();
-        for &(it, res) in log.lock().unwrap().iter() {
-            if it == 0 {
-                attempts.push((0, res <= tol));
+    let (mut kept, mut doubled) = (false, false);
+    for (steps, max) in [(4, 7), (2, 8)] {
+        let mut sim = sim_with("elastic-beam-ghost", |s| {
+            s.analysis.load_steps = steps;
+            s.analysis.max_cutbacks = 4;
+            s.analysis.max_iterations = max;
+        });
+        let tol = sim.params().tolerance;
+        let log: Arc<Mutex<Vec<(usize, f64)>>> = Arc::default();
+        let sink = log.clone();
+        sim.set_progress(Some(Box::new(move |p| {
+            sink.lock().unwrap().push((p.iteration, p.residual));
+            true
+        })));
+        let delta = 1.0 / steps as f64;
+        while !sim.finished() {
+            log.lock().unwrap().clear();
+            let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+            let s = r.solver.as_ref().unwrap();
+            let at_step = format!("{steps} steps, limit {max}, step {}", r.step);
+            // The step's attempts: (iterations, converged).
+            let mut attempts: Vec<(usize, bool)> = Vec::new();
+            for &(it, res) in log.lock().unwrap().iter() {
+                if it == 0 {
+                    attempts.push((0, res <= tol));
+                }
+                *attempts.last_mut().unwrap() = (it, res <= tol);
             }
-            *attempts.last_mut().unwrap() = (it, res <= tol);
-        }
-        let (l0, l1) = ((r.step - 1) as f64 * delta, r.step as f64 * delta);
-        let cuts: Vec<(f64, f64)> = s.cutbacks.iter().map(|c| (c.from, c.to)).collect();
-        println!("step {}: attempts {attempts:?}, cutbacks {cuts:?}", r.step);
-        if cuts.is_empty() {
-            assert_eq!(attempts.len(), 1, "step {}", r.step);
-            continue;
-        }
-        assert!(!attempts[0].1, "step {}: the whole increment failed", r.step);
-        let mut failed = vec![(l0, l1)];
-        let (mut at, mut size, mut depth, mut substeps) = (l0, 0.5 * delta, 1usize, 0);
-        let mut reached = false;
-        for (k, &(its, converged)) in attempts.iter().enumerate().skip(1) {
-            let last = at + size >= l1 - 1e-12 * delta;
-            let to = if last { l1 } else { at + size };
-            if !converged {
-                failed.push((at, to));
-                size *= 0.5;
-                depth += 1;
+            let (l0, l1) = ((r.step - 1) as f64 * delta, r.step as f64 * delta);
+            let cuts: Vec<(f64, f64)> = s.cutbacks.iter().map(|c| (c.from, c.to)).collect();
+            println!("{at_step}: attempts {attempts:?}, cutbacks {cuts:?}");
+            if cuts.is_empty() {
+                assert_eq!(attempts.len(), 1, "{at_step}");
                 continue;
             }
-            substeps += 1;
-            if last {
-                assert_eq!(k, attempts.len() - 1, "step {}: attempts after lambda_(n+1)", r.step);
-                reached = true;
-                break;
+            assert!(!attempts[0].1, "{at_step}: the whole increment failed");
+            let mut failed = vec![(l0, l1)];
+            let (mut at, mut size, mut depth, mut substeps) = (l0, 0.5 * delta, 1usize, 0);
+            let mut reached = false;
+            for (k, &(its, converged)) in attempts.iter().enumerate().skip(1) {
+                let last = at + size >= l1 - 1e-12 * delta;
+                let to = if last { l1 } else { at + size };
+                if !converged {
+                    failed.push((at, to));
+                    size *= 0.5;
+                    depth += 1;
+                    continue;
+                }
+                substeps += 1;
+                if last {
+                    assert_eq!(k, attempts.len() - 1, "{at_step}: attempts after lambda_(n+1)");
+                    reached = true;
+                    break;
+                }
+                at = to;
+                if its * 2 <= max && depth > 0 {
+                    size *= 2.0;
+                    depth -= 1;
+                    doubled = true;
+                } else {
+                    kept = true;
+                }
             }
-            at = to;
-            if its * 2 <= max && depth > 0 {
-                size *= 2.0;
-                depth -= 1;
-            } else {
-                kept = true;
+            assert!(reached, "{at_step}: the replay ends short of lambda_(n+1)");
+            assert_eq!(substeps, s.substeps, "{at_step}");
+            assert_eq!(failed.len(), cuts.len(), "{at_step}: predicted {failed:?}");
+            for (f, c) in failed.iter().zip(&cuts) {
+                // 1e-12 of Delta: round-off of sums of binary fractions of it.
+                assert!(
+                    (f.0 - c.0).abs() < 1e-12 * delta && (f.1 - c.1).abs() < 1e-12 * delta,
+                    "{at_step}: predicted {failed:?}, recorded {cuts:?}"
+                );
             }
-        }
-        assert!(reached, "step {}: the replay ends short of lambda_(n+1)", r.step);
-        assert_eq!(substeps, s.substeps, "step {}", r.step);
-        assert_eq!(failed.len(), cuts.len(), "step {}: predicted {failed:?}", r.step);
-        for (f, c) in failed.iter().zip(&cuts) {
-            // 1e-12 of Delta: round-off of sums of binary fractions of it.
-            assert!(
-                (f.0 - c.0).abs() < 1e-12 * delta && (f.1 - c.1).abs() < 1e-12 * delta,
-                "step {}: predicted {failed:?}, recorded {cuts:?}",
-                r.step
-            );
         }
     }
     assert!(kept, "a converged sub-step above half the limit was seen");
+    assert!(doubled, "a converged sub-step at or below half the limit was seen");
 }
 
 #[test]
