@@ -1587,3 +1587,42 @@ condition_every = 0
         other => panic!("a domain 1e-4 h past the edge must leave the grid: {other:?}"),
     }
 }
+
+#[test]
+fn tracking_points_activate_no_node_of_a_lumped_step() {
+    // A boundary's tracking points have no volume and no mass: they follow
+    // the body and carry nothing. Three of them half a cell beyond the
+    // block's right edge (x = 0.75 m: their cells reach the nodes at x =
+    // 0.8 m, which no point with volume reaches) must not make those nodes
+    // part of an explicit lumped step, which would give them zero mass
+    // (no explicit step is then stable). With or without the boundary
+    // the step has the same active nodes and unknowns, and both runs
+    // complete.
+    let block = r#"
+[[body]]
+name = "block"
+material = "jelly"
+points_per_cell = 2
+region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
+"#;
+    let tracked = format!(
+        r#"{block}
+[[boundary]]
+name = "edge"
+body = "block"
+points = [[0.75, 0.4], [0.75, 0.5], [0.75, 0.6]]
+"#
+    );
+    let mut plain = jelly("lumped-block", block, -1.0, 0.02, 2, 0, "lumped");
+    let mut with = jelly("lumped-block-tracked", &tracked, -1.0, 0.02, 2, 0, "lumped");
+    assert_eq!(with.points().len(), plain.points().len() + 3);
+    let (a, b) = (run(&mut plain), run(&mut with));
+    for (a, b) in a.iter().zip(&b) {
+        assert_eq!(
+            (a.active_nodes, a.unknowns),
+            (b.active_nodes, b.unknowns),
+            "step {}",
+            a.step
+        );
+    }
+}
