@@ -1626,3 +1626,19 @@ points = [[0.75, 0.4], [0.75, 0.5], [0.75, 0.6]]
         );
     }
 }
+
+#[test]
+fn a_translating_body_reports_its_momentum() {
+    // The ghost at 1 m/s along x, stress-free, no gravity: after a step
+    // every point still moves at 1 m/s (the stabilised mass reproduces a
+    // uniform velocity), so the step's momentum is the body's mass times
+    // (1, 0) kg m/s per unit thickness (round-off of a sum over the
+    // points: 1e-12 of it).
+    let mut sim = translating_ghost(1.0, 0.0, 0);
+    let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
+    let mass: f64 = sim.points().mass.iter().sum();
+    let p = r.dynamics.as_ref().unwrap().momentum;
+    println!("momentum {p:?}, mass {mass}");
+    assert!(mass > 0.0);
+    assert!((p[0] - mass).abs() < 1e-12 * mass && p[1].abs() < 1e-12 * mass, "{p:?}");
+}

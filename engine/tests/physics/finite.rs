@@ -748,11 +748,12 @@ fn cutback_sizes_follow_each_sub_steps_newton_iterations() {
     // predicts must be the step's recorded cutbacks, and its converged
     // attempts the step's sub-steps. G 5.2's beam in 4 steps held to 7
     // iterations (as the test below: a converged sub-step above half the
-    // limit keeps the size for the next) and in 2 steps held to 8 (a
-    // sub-step of 4 iterations, inside a cut step, doubles the next).
+    // limit keeps the size for the next), in 2 steps held to 8 (a
+    // sub-step of 4 iterations, inside a cut step, doubles the next) and
+    // in 1 step held to 8 (a doubled sub-step followed by more).
     use std::sync::{Arc, Mutex};
     let (mut kept, mut doubled) = (false, false);
-    for (steps, max) in [(4, 7), (2, 8)] {
+    for (steps, max) in [(4, 7), (2, 8), (1, 8)] {
         let mut sim = sim_with("elastic-beam-ghost", |s| {
             s.analysis.load_steps = steps;
             s.analysis.max_cutbacks = 4;
