@@ -1475,3 +1475,25 @@ fn the_band_looks_for_points_only_in_cells_of_the_grid() {
     let material = BandMaterial::new(&grid, &xs, &[1.0, 1.0], &|p| c(1.0 + p as f64));
     assert_eq!(material.at(&grid, [3.5, 0.5]), c(1.5));
 }
+
+#[test]
+fn a_partly_filled_cell_on_the_grids_edge_is_cut() {
+    // Every cell of a 3 x 3 grid active, so no cell has an inactive
+    // neighbour. A cell on the grid's edge still counts as cut by the
+    // material's boundary when it is partly filled (`ghost::faces`, fill
+    // below 0.9: a body leaving the grid's edge); full, it does not (a body
+    // resting on the grid's boundary). With every cell full there is no
+    // ghost face; with the left middle cell (0, 1) half full, its three
+    // faces with active cells (below, right, above) are ghost faces.
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        h: 1.0,
+        nx: 3,
+        ny: 3,
+    };
+    let active: Vec<usize> = (0..9).collect();
+    let mut fill = vec![1.0; grid.num_cells()];
+    assert_eq!(ghost::faces(&grid, &active, &fill).len(), 0);
+    fill[3] = 0.5;
+    assert_eq!(ghost::faces(&grid, &active, &fill).len(), 3);
+}
