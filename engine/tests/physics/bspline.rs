@@ -21,6 +21,25 @@ fn random_points(seed: &[f64]) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// The unit square counter-clockwise from the origin, 3 points a side
+/// (corners included once): `(k / 3)` steps along each side, so a side's
+/// points are collinear to the bit.
+fn unit_square() -> Vec<[f64; 2]> {
+    let mut q = Vec::new();
+    for (x0, y0, dx, dy) in [
+        (0.0, 0.0, 1.0, 0.0),
+        (1.0, 0.0, 0.0, 1.0),
+        (1.0, 1.0, -1.0, 0.0),
+        (0.0, 1.0, 0.0, -1.0),
+    ] {
+        for k in 0..3 {
+            let f = k as f64 / 3.0;
+            q.push([x0 + dx * f, y0 + dy * f]);
+        }
+    }
+    q
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(200))]
 
@@ -152,19 +171,7 @@ fn straight_runs_stay_straight() {
 fn corners_keep_the_sides_of_a_square_straight() {
     // A closed square sampled with 3 points per side: corners are detected
     // (both side triples collinear, the sides not) without being marked.
-    let mut q = Vec::new();
-    for k in 0..3 {
-        q.push([k as f64 / 3.0, 0.0]);
-    }
-    for k in 0..3 {
-        q.push([1.0, k as f64 / 3.0]);
-    }
-    for k in 0..3 {
-        q.push([1.0 - k as f64 / 3.0, 1.0]);
-    }
-    for k in 0..3 {
-        q.push([0.0, 1.0 - k as f64 / 3.0]);
-    }
+    let q = unit_square();
     let s = BSpline::interpolate(&q, true, &[]).unwrap();
     for k in 0..s.segments.len() {
         for t in [0.2, 0.5, 0.9] {
@@ -181,19 +188,7 @@ fn signed_area_is_positive_counter_clockwise_and_scales_with_the_square() {
     // straight): Green's theorem on the curve gives 4 counter-clockwise
     // and -4 read clockwise (the quadrature is exact on cubics; round-off
     // 1e-13 of the area).
-    let side = 2.0;
-    let mut q = Vec::new();
-    for (x0, y0, dx, dy) in [
-        (0.0, 0.0, 1.0, 0.0),
-        (1.0, 0.0, 0.0, 1.0),
-        (1.0, 1.0, -1.0, 0.0),
-        (0.0, 1.0, 0.0, -1.0),
-    ] {
-        for k in 0..3 {
-            let f = k as f64 / 3.0;
-            q.push([side * (x0 + dx * f), side * (y0 + dy * f)]);
-        }
-    }
+    let mut q: Vec<[f64; 2]> = unit_square().iter().map(|p| [2.0 * p[0], 2.0 * p[1]]).collect();
     let ccw = BSpline::interpolate(&q, true, &[]).unwrap();
     q.reverse();
     let cw = BSpline::interpolate(&q, true, &[]).unwrap();
@@ -518,21 +513,15 @@ fn corners_are_found_in_any_units_and_ignored_at_open_ends() {
     // (|C''| at round-off of the curve's size) in both.
     let (sn, c) = 30f64.to_radians().sin_cos();
     for side in [1.0, 1e4] {
-        let mut q = Vec::new();
-        for (x0, y0, dx, dy) in [
-            (0.0, 0.0, 1.0, 0.0),
-            (1.0, 0.0, 0.0, 1.0),
-            (1.0, 1.0, -1.0, 0.0),
-            (0.0, 1.0, 0.0, -1.0),
-        ] {
-            for k in 0..3 {
-                let (x, y) = (x0 + dx * k as f64 / 3.0, y0 + dy * k as f64 / 3.0);
-                q.push([
+        let q: Vec<[f64; 2]> = unit_square()
+            .iter()
+            .map(|&[x, y]| {
+                [
                     side * (c * x - sn * y) + 0.1 * side,
                     side * (sn * x + c * y) + 0.3 * side,
-                ]);
-            }
-        }
+                ]
+            })
+            .collect();
         let s = BSpline::interpolate(&q, true, &[]).unwrap();
         for k in 0..s.segments.len() {
             for t in [0.2, 0.5, 0.9] {

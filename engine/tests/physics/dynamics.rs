@@ -1330,6 +1330,19 @@ fn explicit_cutbacks_halve_the_sub_step_where_it_failed() {
     assert!(later > 0, "a cut that starts past t_n was seen");
 }
 
+/// The step's cutbacks `cuts` (s) are the fractions `want` of its time
+/// step `dt` (a step starting at 0), to 1e-12 of `dt`: round-off of
+/// `t + dt / 2^j` (0.05 s is not binary).
+fn assert_cuts(cuts: &[(f64, f64)], want: &[(f64, f64)], dt: f64) {
+    assert_eq!(cuts.len(), want.len(), "{cuts:?}");
+    for (&(a, b), &(wa, wb)) in cuts.iter().zip(want) {
+        assert!(
+            (a - wa * dt).abs() < 1e-12 * dt && (b - wb * dt).abs() < 1e-12 * dt,
+            "{cuts:?}, want {want:?} of {dt}"
+        );
+    }
+}
+
 /// The ghost of [`flying_ghost`] without its velocity gradient: every
 /// point at `speed` m/s along x, accelerated by `gx` m/s^2, in steps of
 /// 0.05 s, cut back at most `max_cutbacks` halvings deep.
@@ -1390,15 +1403,7 @@ fn a_failing_second_quarter_is_cut_back_no_deeper_than_allowed() {
     let r = deep.step().unwrap_or_else(|f| panic!("max_cutbacks = 3: {f}"));
     let cuts: Vec<(f64, f64)> = r.cutbacks().iter().map(|c| (c.from, c.to)).collect();
     println!("max_cutbacks = 3: {cuts:?}");
-    // 1e-12 of dt: round-off of t + dt / 2^j (0.05 is not binary).
-    let want = [(0.0, 1.0), (0.0, 0.5), (0.5, 1.0), (0.75, 1.0)];
-    assert_eq!(cuts.len(), want.len(), "{cuts:?}");
-    for (&(a, b), (wa, wb)) in cuts.iter().zip(want) {
-        assert!(
-            (a - wa * dt).abs() < 1e-12 * dt && (b - wb * dt).abs() < 1e-12 * dt,
-            "{cuts:?}"
-        );
-    }
+    assert_cuts(&cuts, &[(0.0, 1.0), (0.0, 0.5), (0.5, 1.0), (0.75, 1.0)], dt);
     assert_eq!(r.dynamics.as_ref().unwrap().substeps, 5);
     // The ghost's speed after the step: g dt, as for a step not cut.
     let v = &deep.points().v;
@@ -1412,18 +1417,18 @@ fn a_failing_second_quarter_is_cut_back_no_deeper_than_allowed() {
 
 #[test]
 fn a_step_cut_back_inside_its_cells_reuses_the_mass_pattern() {
-    // A block of 2 x 2 points in the middle of one cell, expanding at
-    // L = 12 I 1/s about its centre (no translation), standard basis: the
-    // stabilised mass of one cell's four points reproduces that linear
+    // One cell filled with 2 x 2 points, expanding at L = 12 I 1/s about
+    // its centre (no translation), standard basis: the stabilised mass
+    // of one cell's four points reproduces that linear
     // field exactly, so the whole step's deformation increment is dF =
     // I + 12 dt I, |dF - I| = 12 sqrt(2) dt = 0.85 for dt = 0.05 s, more
     // than the explicit guard's 1/2 (the step's first attempt reports
     // it); its halves deform the block less than that (0.42 for the
     // first). The points start 0.025 m from the centre in each direction,
     // a quarter cell inside their cell, and stay in it (the test checks
-    // where they end): no point changes cell, so every attempt of the step maps the
-    // same blocks. The failed whole step factorises the pattern, both
-    // halves reuse it, and the step reports the pattern reused
+    // where they end): no point changes cell, so every attempt of the
+    // step maps the same blocks. The failed whole step factorises the
+    // pattern, both halves reuse it, and the step reports the pattern reused
     // (`dynamics::Merged::add`: reused only if every sub-step reused it).
     let body = r#"
 [[body]]
@@ -1489,15 +1494,7 @@ velocity = [8.0, 0.0]
     let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
     let cuts: Vec<(f64, f64)> = r.cutbacks().iter().map(|c| (c.from, c.to)).collect();
     println!("{cuts:?}");
-    // 1e-12 of dt: round-off of t + dt / 2^j.
-    let want = [(0.0, 1.0), (0.0, 0.5)];
-    assert_eq!(cuts.len(), want.len(), "{cuts:?}");
-    for (&(a, b), (wa, wb)) in cuts.iter().zip(want) {
-        assert!(
-            (a - wa * dt).abs() < 1e-12 * dt && (b - wb * dt).abs() < 1e-12 * dt,
-            "{cuts:?}"
-        );
-    }
+    assert_cuts(&cuts, &[(0.0, 1.0), (0.0, 0.5)], dt);
     let d = r.dynamics.as_ref().unwrap();
     assert_eq!(d.substeps, 3);
     // Where the step leaves the points: 0.0828 + 0.0656 + 0.0625 m on.
