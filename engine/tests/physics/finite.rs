@@ -883,3 +883,45 @@ fn cutbacks_halve_the_increment_from_the_last_converged_state() {
     }
     assert!(cut_late, "a step from a non-zero load factor was cut back");
 }
+
+#[test]
+fn a_sub_step_failing_after_a_doubling_is_cut_no_deeper_than_allowed() {
+    // The footing of `rigid-footing-large` pushed its whole way in 3 load
+    // steps, Newton held to 10 iterations. Step 1 grows harder as it goes:
+    // the whole third fails, then its half; the first quarter converges in
+    // 5 iterations (at most half the limit), so the size doubles back to a
+    // half and the depth drops to 1 (`newton::cut_back`); that half fails
+    // and so does its half, and eighths of Delta = 1/3 reach lambda_1.
+    // Cutbacks: (0, 1/3), (0, 1/6), (1/12, 1/4), (1/12, 1/6), the last
+    // two at depths 1 and 2 after the doubling, so 3 cutbacks allowed
+    // suffice and 2 do not (the last one needs depth 3). Had the depth not
+    // dropped with the doubling, the last cut would need depth 4.
+    let run = |max_cutbacks: usize| {
+        let mut sim = sim_with("rigid-footing-large", |s| {
+            s.analysis.load_steps = 3;
+            s.analysis.max_iterations = 10;
+            s.analysis.max_cutbacks = max_cutbacks;
+        });
+        sim.step()
+    };
+    let r = run(3).unwrap_or_else(|f| panic!("{f}"));
+    let s = r.solver.as_ref().unwrap();
+    let cuts: Vec<(f64, f64)> = s.cutbacks.iter().map(|c| (c.from, c.to)).collect();
+    let d = 1.0 / 3.0;
+    let expected = [(0.0, d), (0.0, d / 2.0), (d / 4.0, 3.0 * d / 4.0), (d / 4.0, d / 2.0)];
+    assert_eq!(cuts.len(), expected.len(), "cutbacks {cuts:?}");
+    for (c, e) in cuts.iter().zip(&expected) {
+        // Round-off of sums of binary fractions of Delta.
+        assert!(
+            (c.0 - e.0).abs() < 1e-12 && (c.1 - e.1).abs() < 1e-12,
+            "cutbacks {cuts:?}"
+        );
+    }
+    // The quarter, then six eighths to lambda_1.
+    assert_eq!(s.substeps, 7);
+    assert_eq!(r.load_factor, d);
+    match run(2) {
+        Err(StepFailure::NotConverged { step: 1, .. }) => {}
+        other => panic!("with 2 cutbacks step 1 must fail to converge: {other:?}"),
+    }
+}
