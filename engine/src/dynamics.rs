@@ -1386,4 +1386,24 @@ mass = "stabilised"
         let lambda = generalised_lambda_max(k.as_ref(), |x: &[f64]| x.to_vec(), |b: &[f64]| b.to_vec());
         assert!((lambda - c).abs() < 1e-6 * c, "{lambda}, want {c}");
     }
+
+    #[test]
+    fn generalised_lambda_max_scales_with_the_stiffness() {
+        use faer::sparse::{SparseColMat, Triplet};
+        // K = s diag(1, 2, 3) against M = I: the largest eigenvalue is 3 s
+        // for a stiffness in any unit (s from 1e-12 to 1e12); the settle
+        // test is relative, so a tiny K converges as far as a big one.
+        // The iteration settles at 1e-8 relative change with error
+        // ratio (2/3)^2 per step: 1e-6 of 3 s is room for it.
+        for s in [1e-12, 1.0, 1e12] {
+            let t: Vec<_> = (0..3).map(|i| Triplet::new(i, i, s * (i + 1) as f64)).collect();
+            let k = SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(3, 3, &t).unwrap();
+            let lambda = generalised_lambda_max(k.as_ref(), |x: &[f64]| x.to_vec(), |b: &[f64]| b.to_vec());
+            assert!(
+                (lambda - 3.0 * s).abs() < 1e-6 * 3.0 * s,
+                "s = {s}: {lambda}, want {}",
+                3.0 * s
+            );
+        }
+    }
 }

@@ -622,7 +622,9 @@ fn reaction_split_of_nearly_parallel_rollers_is_the_same_in_any_unit_of_length()
     // rank-one threshold 1e-10 (tr M)^2, so r = 3 n1 + 2 n2 splits
     // exactly along the normals (`ibm::split_reaction`). The weights are
     // integrals along the boundary (m): in millimetres or micrometres they
-    // are 1e3 or 1e6 times larger, and the split must not change. M's
+    // are 1e3 or 1e6 times larger, in km or 1000 km 1e-3 or 1e-6 times
+    // smaller (det M then 2.4e-17, below 1e-10 in absolute terms), and the
+    // split must not change. M's
     // condition is ~1e4: 1e-9 of the shares' size leaves room for its
     // round-off.
     use mpmlab_engine::ibm::split_reaction;
@@ -633,7 +635,7 @@ fn reaction_split_of_nearly_parallel_rollers_is_the_same_in_any_unit_of_length()
     let (n1, n2) = (at(45.0, 0.005), at(45.0, -0.005));
     let outer = |n: [f64; 2], w: f64| [[w * n[0] * n[0], w * n[0] * n[1]], [w * n[1] * n[0], w * n[1] * n[1]]];
     let r = [3.0 * n1[0] + 2.0 * n2[0], 3.0 * n1[1] + 2.0 * n2[1]];
-    for unit in [1.0, 1e3, 1e6] {
+    for unit in [1e-6, 1e-3, 1.0, 1e3, 1e6] {
         let s = split_reaction(r, &[outer(n1, 0.4 * unit), outer(n2, 0.6 * unit)], [0.0; 2]);
         let want = [[3.0 * n1[0], 3.0 * n1[1]], [2.0 * n2[0], 2.0 * n2[1]]];
         for (s, w) in s.iter().zip(want) {
