@@ -87,3 +87,17 @@ pub fn mul3(d: &[[f64; 3]; 3], e: [f64; 3]) -> [f64; 3] {
         d[2][0] * e[0] + d[2][1] * e[1] + d[2][2] * e[2],
     ]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::mul3;
+
+    /// `mul3` is the full product `D e`: every entry of a general
+    /// (non-symmetric, anisotropic) D counts, not only the isotropic
+    /// pattern the shipped materials fill. Small integers: exact.
+    #[test]
+    fn mul3_is_the_matrix_vector_product() {
+        let d = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]];
+        assert_eq!(mul3(&d, [1.0, 10.0, 100.0]), [321.0, 654.0, 987.0]);
+    }
+}
