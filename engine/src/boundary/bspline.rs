@@ -48,7 +48,6 @@ pub struct BSpline {
     pub segments: Vec<[P2; 4]>,
     /// Knots `u_0 = 0 < u_1 < ... < u_m = 1` bounding the segments.
     pub knots: Vec<f64>,
-    pub closed: bool,
 }
 
 /// Why a set of points cannot be interpolated.
@@ -220,11 +219,7 @@ impl<'a> Interpolation<'a> {
         }
         let total = knots[ks.len()];
         knots.iter_mut().for_each(|u| *u /= total);
-        BSpline {
-            segments,
-            knots,
-            closed: false,
-        }
+        BSpline { segments, knots }
     }
 }
 
@@ -233,10 +228,7 @@ impl BSpline {
     pub fn interpolate(points: &[P2], closed: bool, corners: &[bool]) -> Result<BSpline, SplineError> {
         let it = Interpolation::new(points, closed, corners)?;
         let all: Vec<usize> = (0..it.segments()).collect();
-        Ok(BSpline {
-            closed,
-            ..it.spline_of(&all)
-        })
+        Ok(it.spline_of(&all))
     }
 
     /// Position on segment `k` at local parameter `t` in [0, 1].
