@@ -592,6 +592,12 @@ fn shared_node_reactions_split_along_the_constraints() {
     let r = [2.0 * n1[0] + 5.0, 2.0 * n1[1]];
     let s = split_reaction(r, &[outer(n1, 0.3)], [0.2, 0.0]);
     assert!(close(s[0], [2.0 * n1[0], 2.0 * n1[1]]), "{s:?}");
+    // A roller whose normal is x and a grid roller holding x: M =
+    // diag(w + g, 0) is singular (rank one), y = M^+ r = (r_x / (w + g), 0).
+    // The boundary takes w y = r_x w / (w + g) along x (1 : 3 here, as the
+    // fixed boundary above) and, through what M cannot carry, all of r_y.
+    let s = split_reaction([4.0, 2.0], &[outer([1.0, 0.0], 1.0)], [3.0, 0.0]);
+    assert!(close(s[0], [1.0, 2.0]), "{s:?}");
     // Two parallel rollers (normal at 45 deg, weights 1 and 3): M = 4 n n^T
     // is singular; each takes its weight's share along n, and what M cannot
     // carry (r's tangential part) goes in proportion to tr W = 1 : 3, so
