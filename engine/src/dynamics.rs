@@ -1363,21 +1363,24 @@ mass = "stabilised"
     /// The power iteration of the CFL numbers: for `K = diag(3, 2)`, `M =
     /// diag(1, 4)` the largest eigenvalue of `K x = lambda M x` is 3 (the
     /// iteration settles to 1e-8 relative; 1e-6 leaves room). A mass with
+    /// A diagonal stiffness `diag(d)`, stored in full as the CFL's `K` is.
+    fn diag(d: &[f64]) -> faer::sparse::SparseColMat<linalg::Ix, f64> {
+        let t: Vec<_> = (0..d.len())
+            .map(|i| faer::sparse::Triplet::new(i as linalg::Ix, i as linalg::Ix, d[i]))
+            .collect();
+        faer::sparse::SparseColMat::try_new_from_triplets(d.len(), d.len(), &t).unwrap()
+    }
+
     /// `x.Mx <= 0` (`M = -I`, whose "eigenvalue" with `K = I` would be -1)
     /// has no stable explicit step: infinite `lambda_max`, CFL number 0.
     #[test]
     fn generalised_lambda_max_is_infinite_for_a_mass_that_is_not_positive() {
-        use faer::sparse::{SparseColMat, Triplet};
-        let diag = |d: [f64; 2]| {
-            let t = [Triplet::new(0, 0, d[0]), Triplet::new(1, 1, d[1])];
-            SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(2, 2, &t).unwrap()
-        };
         let mul = |d: [f64; 2]| move |x: &[f64]| vec![d[0] * x[0], d[1] * x[1]];
         let solve = |d: [f64; 2]| move |b: &[f64]| vec![b[0] / d[0], b[1] / d[1]];
-        let k = diag([3.0, 2.0]);
+        let k = diag(&[3.0, 2.0]);
         let lambda = generalised_lambda_max(k.as_ref(), mul([1.0, 4.0]), solve([1.0, 4.0]));
         assert!((lambda - 3.0).abs() < 1e-6 * 3.0, "{lambda}");
-        let k = diag([1.0, 1.0]);
+        let k = diag(&[1.0, 1.0]);
         let lambda = generalised_lambda_max(k.as_ref(), mul([-1.0, -1.0]), solve([-1.0, -1.0]));
         assert_eq!(lambda, f64::INFINITY);
         assert_eq!(cfl(1.0, lambda), Some(0.0));
@@ -1390,7 +1393,6 @@ mass = "stabilised"
     /// found (to the iteration's 1e-8; 1e-6 leaves room).
     #[test]
     fn generalised_lambda_max_goes_on_past_a_negative_start() {
-        use faer::sparse::{SparseColMat, Triplet};
         // The start `generalised_lambda_max` draws.
         let mut rand = crate::linalg::XorShift::new(0x2545_f491_4f6c_dd1d);
         let (a, b) = (rand.centred(), rand.centred());
@@ -1401,23 +1403,19 @@ mass = "stabilised"
         let mut d = [c; 2];
         d[first] = -1.0;
         assert!(d[0] * a * a + d[1] * b * b < 0.0 && c > 1.0);
-        let t = [Triplet::new(0, 0, d[0]), Triplet::new(1, 1, d[1])];
-        let k = SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(2, 2, &t).unwrap();
-        let lambda = generalised_lambda_max(k.as_ref(), |x: &[f64]| x.to_vec(), |b: &[f64]| b.to_vec());
+        let lambda = generalised_lambda_max(diag(&d).as_ref(), |x: &[f64]| x.to_vec(), |b: &[f64]| b.to_vec());
         assert!((lambda - c).abs() < 1e-6 * c, "{lambda}, want {c}");
     }
 
     #[test]
     fn generalised_lambda_max_scales_with_the_stiffness() {
-        use faer::sparse::{SparseColMat, Triplet};
         // K = s diag(1, 2, 3) against M = I: the largest eigenvalue is 3 s
         // for a stiffness in any unit (s from 1e-12 to 1e12); the settle
         // test is relative, so a tiny K converges as far as a big one.
         // The iteration settles at 1e-8 relative change with error
         // ratio (2/3)^2 per step: 1e-6 of 3 s is room for it.
         for s in [1e-12, 1.0, 1e12] {
-            let t: Vec<_> = (0..3).map(|i| Triplet::new(i, i, s * (i + 1) as f64)).collect();
-            let k = SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(3, 3, &t).unwrap();
+            let k = diag(&[s, 2.0 * s, 3.0 * s]);
             let lambda = generalised_lambda_max(k.as_ref(), |x: &[f64]| x.to_vec(), |b: &[f64]| b.to_vec());
             assert!(
                 (lambda - 3.0 * s).abs() < 1e-6 * 3.0 * s,
@@ -1436,15 +1434,6 @@ mass = "stabilised"
     /// number, never the square root of a negative one.
     #[test]
     fn generalised_lambda_max_is_the_largest_positive_eigenvalue_of_an_indefinite_k() {
-        use faer::sparse::{SparseColMat, Triplet};
-        let diag = |d: &[f64]| {
-            let t: Vec<_> = d
-                .iter()
-                .enumerate()
-                .map(|(i, &v)| Triplet::new(i as linalg::Ix, i as linalg::Ix, v))
-                .collect();
-            SparseColMat::<linalg::Ix, f64>::try_new_from_triplets(d.len(), d.len(), &t).unwrap()
-        };
         let id = |x: &[f64]| x.to_vec();
         let lambda = generalised_lambda_max(diag(&[-3.0, 1.0, 0.5]).as_ref(), id, id);
         assert!((lambda - 1.0).abs() < 1e-6, "{lambda}");

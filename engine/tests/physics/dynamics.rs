@@ -714,6 +714,16 @@ velocity_centre = [0.5, 0.5]
     jelly("flying-ghost", &body, gx, duration, steps, max_cutbacks, "stabilised")
 }
 
+/// A 0.4 m square block of `jelly` (2x2 points per cell) from (0.3, 0.3) to
+/// (0.7, 0.7) m on [`jelly`]'s grid.
+const JELLY_BLOCK: &str = r#"
+[[body]]
+name = "block"
+material = "jelly"
+points_per_cell = 2
+region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
+"#;
+
 /// An explicit run (USF, FLIP, the mass matrix `mass`: "consistent",
 /// "stabilised" or "lumped") of `body` made of a 1000 kg/m^3 jelly
 /// (E = 1 kPa) on a 3 m x 1 m grid of h = 0.1 m, under gravity `gx`
@@ -1059,13 +1069,7 @@ fn free_fall_kinetic_energy_and_gravity_work_are_closed_forms() {
     // (lumped, or consistent with the ghost term) sum to M over a uniform
     // field.
     let (g, dt, steps) = (2.0, 0.01, 10);
-    let block = r#"
-[[body]]
-name = "block"
-material = "jelly"
-points_per_cell = 2
-region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
-"#;
+    let block = JELLY_BLOCK;
     // Along x and along y: each direction's body force is its own.
     for (mass_matrix, gravity) in [
         ("stabilised", [g, 0.0]),
@@ -1595,13 +1599,7 @@ fn tracking_points_activate_no_node_of_a_lumped_step() {
     // (no explicit step is then stable). With or without the boundary
     // the step has the same active nodes and unknowns, and both runs
     // complete.
-    let block = r#"
-[[body]]
-name = "block"
-material = "jelly"
-points_per_cell = 2
-region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
-"#;
+    let block = JELLY_BLOCK;
     let tracked = format!(
         r#"{block}
 [[boundary]]
@@ -1650,18 +1648,14 @@ fn a_point_load_gives_its_impulse_to_a_free_body() {
     // 0.01 s: with FLIP the points' momentum changes by the grid's
     // sum_v M_v a_v dt = F dt, so it is (0.03, -0.02) kg m/s after the step
     // (round-off of the sums: 1e-12 of it).
-    let body = r#"
-[[body]]
-name = "block"
-material = "jelly"
-points_per_cell = 2
-region = { shape = "rectangle", min = [0.3, 0.3], max = [0.7, 0.7] }
-
+    let body = format!(
+        r#"{JELLY_BLOCK}
 [[loads.point]]
 at = [0.52, 0.47]
 force = [3.0, -2.0]
-"#;
-    let mut sim = jelly("point-loaded-block", body, 0.0, 0.01, 1, 0, "lumped");
+"#
+    );
+    let mut sim = jelly("point-loaded-block", &body, 0.0, 0.01, 1, 0, "lumped");
     let r = sim.step().unwrap_or_else(|f| panic!("{f}"));
     let p = r.dynamics.as_ref().unwrap().momentum;
     println!("momentum {p:?}");
