@@ -18,6 +18,7 @@ mod engine;
 mod exact;
 mod fe_equivalence;
 mod finite;
+mod golden;
 mod hencky;
 mod ibm;
 mod operators;
