@@ -32,6 +32,7 @@ pub mod geometry;
 pub mod ghost;
 pub mod grid;
 pub mod ibm;
+mod implicit;
 pub mod kinematics;
 pub mod linalg;
 pub mod linear;

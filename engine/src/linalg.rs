@@ -768,6 +768,11 @@ pub fn lanczos_max_short(
     Some(last)
 }
 
+/// `|v|_2`, summed in order.
+pub fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
 fn dot_product(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -14,14 +14,14 @@
 //! Failures (singular system, residual above tolerance, non-finite values)
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
-use crate::assembly::{Dof, Mapping, Pattern, Storage};
+use crate::assembly::{Dof, Mapping};
 use crate::geometry::P2;
-use crate::ghost;
 use crate::ibm::{self, IbmReport, IbmStep};
+use crate::implicit::{contributions, finish, norm, Assembly, At, Done, Frame, Response};
 use crate::linalg::{self, Condition, Eigen, SparseRef};
 use crate::material::mul3;
 use crate::points::Points;
-use crate::report::{Energy, StepFailure, StepReport, Timings};
+use crate::report::{SolverReport, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
 use crate::state::{check_points, Forces, Simulation};
 use std::time::Instant;
@@ -45,7 +45,7 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     // 3. Factorise (sparse Cholesky). The factorisation holds the step's
     //    peak memory: the stencils and point groups are freed while it
     //    runs and rebuilt, the same numbers, when they are next read.
-    setup.map.release();
+    setup.frame.map.release();
     let t = Instant::now();
     let factor = linalg::cholesky_within(setup.k(&system), sim.model.max_memory).map_err(|e| e.at_step(step))?;
     timings.factorisation = t.elapsed().as_secs_f64();
@@ -55,93 +55,67 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     timings.solve = t.elapsed().as_secs_f64();
     // 5. Condition numbers of the reduced stiffness.
     let t = Instant::now();
-    if !setup.faces.is_empty() && sim.params.condition != ConditionMode::Off {
-        setup.restore_mapping()?;
+    if !setup.frame.faces.is_empty() && sim.params.condition != ConditionMode::Off {
+        setup.frame.restore_mapping()?;
     }
-    let (condition, condition_unstabilised) = conditioning(&setup, &system, &factor, &residuals)?;
+    let condition = conditioning(&setup, &system, &factor, &residuals)?;
     timings.condition = t.elapsed().as_secs_f64();
     // 6. Update the points; work and stored energy (the factor is no
     //    longer needed: free it before the fields the step writes are copied).
     drop(factor);
     let t = Instant::now();
-    setup.restore_mapping()?;
+    setup.frame.restore_mapping()?;
     let updated = update(&setup, &system, &du, &residuals)?;
     timings.update = t.elapsed().as_secs_f64();
     // 7. Commit and report.
-    let map = &setup.map;
-    let (active, n_free, active_nodes) = (map.active_cells.clone(), map.dofs.n_free, map.dofs.active_nodes);
-    let faces = setup.faces.clone();
-    // The penalty's force and work on the nodes' whole motion d + d^a.
-    let nodal = ibm::nodal_motion(&nodal_increments(map, &du), setup.ibm.as_ref());
-    let ghost_force = ghost::force(&faces, sim.params.gamma_k, &nodal);
-    let ghost = ghost::step_work(&sim.state.ghost_force, &ghost_force, &nodal);
-    drop(setup);
-    let active_cells = active.len();
-    sim.commit_quasi_static(updated.points, step, updated.work, active, &faces, 1, lambda1 - lambda0);
-    sim.state.strain_energy = updated.strain_energy;
-    sim.state.ghost_energy += ghost;
-    sim.state.ghost_force = ghost_force;
-    let errors = sim.exact_errors(lambda1);
-    timings.total = start.elapsed().as_secs_f64();
-    Ok(StepReport {
-        step,
-        load_steps: sim.load_steps(),
-        load_factor: lambda1,
-        unknowns: n_free,
-        active_nodes,
-        active_cells,
-        residual_norm: system.residual_norm,
-        residuals,
-        timings,
-        energy: Energy {
-            strain: updated.strain_energy,
-            external_work: sim.state.external_work,
-            plastic_dissipation: 0.0,
-            kinetic: 0.0,
-            ghost: sim.state.ghost_energy,
-        },
-        condition,
-        condition_unstabilised,
+    let done = done(&setup, system, &du, residuals, condition, updated);
+    let strain_energy = done.strain_energy;
+    let report = finish(sim, setup.frame.close(), done, timings, start);
+    sim.state.strain_energy = strain_energy;
+    Ok(report)
+}
+
+/// What the solved step commits and reports.
+fn done(
+    setup: &Setup,
+    system: System,
+    du: &[f64],
+    residuals: Vec<f64>,
+    condition: (Option<Condition>, Option<Condition>),
+    updated: Updated,
+) -> Done {
+    Done {
+        points: updated.points,
+        committed_step: setup.frame.step,
+        // The penalty's force and work on the nodes' whole motion d + d^a.
+        motion: setup.frame.motion(&nodal_increments(&setup.frame.map, du)),
+        strain_energy: updated.strain_energy,
+        dissipation: 0.0,
+        work: updated.work,
         iterations: 1,
-        ghost_faces: faces.len(),
+        residuals,
+        residual_norm: system.residual_norm,
+        condition,
         ibm: updated.ibm,
-        errors,
-        max_increment: updated.max_increment,
         boundaries: system.boundaries,
-        dynamics: None,
-        solver: Some(crate::report::SolverReport {
+        solver: SolverReport {
             factorisation: Some(crate::solver::FactorKind::Cholesky),
             negative_pivots: Some(0),
             cutbacks: Vec::new(),
             substeps: 1,
-        }),
-        probes: Vec::new(),
-    })
+        },
+    }
 }
 
-/// Assembly blocks: point groups, band blocks, ghost faces.
-fn linear_blocks<'a>(map: &'a Mapping, band: &'a [ibm::BandBlock], faces: &'a [ghost::GhostFace]) -> Vec<&'a [usize]> {
-    let mut blocks: Vec<&[usize]> = map.groups.iter().map(|g| g.nodes.as_slice()).collect();
-    blocks.extend(band.iter().map(|b| b.0.as_slice()));
-    blocks.extend(faces.iter().map(|f| f.nodes.as_slice()));
-    blocks
-}
-
-/// What a linear step keeps fixed: the mapping and every method's
-/// contribution.
+/// What a linear step keeps fixed: the frame (mapping, implicit
+/// boundaries' `d^a`, ghost faces) and the contributions: the points'
+/// linear response, the ghost penalty and the band.
 struct Setup<'a> {
-    sim: &'a Simulation,
-    step: usize,
-    lambda0: f64,
-    lambda1: f64,
-    map: Mapping,
-    /// Implicit boundaries: `d^a`, the in-band points, the band's blocks
-    /// and `f_d` (points and band) per node.
-    ibm: Option<IbmStep<'a>>,
-    band: Vec<ibm::BandBlock>,
+    frame: Frame<'a>,
+    assembly: Assembly,
+    /// `f_d` per node: the band's, the in-band points' and the ghost
+    /// penalty's on `d^a` (C (18)-(27); G (27)).
     f_d: Vec<P2>,
-    faces: Vec<ghost::GhostFace>,
-    pattern: Pattern,
 }
 
 impl<'a> Setup<'a> {
@@ -154,134 +128,38 @@ impl<'a> Setup<'a> {
         timings: &mut Timings,
     ) -> Result<Setup<'a>, StepFailure> {
         let start = Instant::now();
-        let grid = &sim.model.grid;
-        let pts = &sim.state.points;
-        let mut map = Mapping::build(grid, pts, &sim.model.bodies, &sim.model.dirichlet, lambda1 - lambda0)
-            .map_err(|e| e.at_step(step))?;
-        let d_of = |p: usize| sim.material_of(p).d_matrix();
-        // Implicit boundaries: prescribed increments d^a on the nodes of cut
-        // cells, and the band integrated as extra blocks (C (18)-(27)).
-        let ibm_step = if ibm_now.is_empty() {
-            None
-        } else {
-            Some(
-                IbmStep::new(
-                    ibm_now,
-                    grid,
-                    &pts.x,
-                    sim.params.delta_over_h,
-                    lambda1 - lambda0,
-                    sim.model.exact.as_ref(),
-                )
-                .map_err(|e| StepFailure::Singular {
-                    step,
-                    reason: e.to_string(),
-                })?,
-            )
-        };
-        // A grid constraint prescribes a node's whole motion: where an
-        // implicit boundary also puts a value d^a on that dof, the grid
-        // unknown carries only the rest.
-        if let Some(s) = &ibm_step {
-            for (n, c, u) in map.dofs.constrained.iter_mut() {
-                *u -= s.da[*n][*c];
-            }
-        }
-        let mut f_d = vec![[0.0; 2]; grid.num_nodes()];
-        let mut band: Vec<ibm::BandBlock> = Vec::new();
-        if let Some(s) = &ibm_step {
-            let material = ibm::BandMaterial::new(grid, &pts.x, &pts.vol, &d_of);
-            (band, f_d) = s.band(grid, &material);
-            for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
-                let st = map.stencils.get(p);
-                let (bbar, _) = s.point_b(st, pts.x[p]);
-                ibm::add_fd(st, &bbar, &d_of(p), &s.da, pts.vol[p], &mut f_d);
-            }
-        }
-        // Ghost faces (G 4.2) join the point groups as blocks of the pattern.
-        let faces = if sim.params.gamma_k > 0.0 {
-            ghost::faces_of(grid, &map, sim.model.analysis.ghost_cells)
-        } else {
-            Vec::new()
-        };
-        // The ghost penalty acts on the nodes' whole motion d + d^a (a
-        // linear field leaves its normal derivative without jumps; d alone
-        // has them where d^a ends): J_G d^a joins f_d.
-        if let Some(s) = &ibm_step {
-            for (n, f) in ghost::force(&faces, sim.params.gamma_k, &s.da).iter().enumerate() {
-                f_d[n][0] += f[0];
-                f_d[n][1] += f[1];
-            }
+        let frame = Frame::new(sim, ibm_now, step, (lambda0, lambda1), false)?;
+        let list = contributions(&frame, Response::Linear, Vec::new())?;
+        // What the implicit boundaries' prescribed motion d^a does at d = 0:
+        // the band's, the in-band points' and the ghost penalty's f_d.
+        let mut f_d = vec![[0.0; 2]; sim.model.grid.num_nodes()];
+        for c in &list {
+            c.prescribed(&frame, &mut f_d);
         }
         timings.mapping = start.elapsed().as_secs_f64();
         let t = Instant::now();
-        let pattern = Pattern::new(&map.dofs, &linear_blocks(&map, &band, &faces), Storage::Lower)
-            .map_err(|e| e.at_step(step))?;
+        let assembly = Assembly::new(&frame, list)?;
         timings.pattern = t.elapsed().as_secs_f64();
-        Ok(Setup {
-            sim,
-            step,
-            lambda0,
-            lambda1,
-            map,
-            ibm: ibm_step,
-            band,
-            f_d,
-            faces,
-            pattern,
-        })
-    }
-
-    /// The mapping's stencils and point groups again after they were
-    /// freed for the factorisation ([`Mapping::restore`]).
-    fn restore_mapping(&mut self) -> Result<(), StepFailure> {
-        let sim = self.sim;
-        self.map
-            .restore(&sim.model.grid, &sim.state.points, &sim.model.bodies)
-            .map_err(|e| e.at_step(self.step))
-    }
-
-    fn blocks(&self) -> Vec<&[usize]> {
-        linear_blocks(&self.map, &self.band, &self.faces)
+        Ok(Setup { frame, assembly, f_d })
     }
 
     /// The reduced stiffness `K` of `system` (lower triangle), over the
     /// step's pattern.
     fn k<'s>(&'s self, system: &'s System) -> SparseRef<'s> {
-        self.pattern.matrix(&system.k)
+        self.assembly.matrix(&system.k)
     }
 
     /// The reduced stiffness' values (lower triangle, over the pattern) and
     /// `K_fc du_c`, with or without the ghost term.
     fn stiffness(&self, with_ghost: bool) -> Result<(Vec<f64>, Vec<f64>), StepFailure> {
-        let (map, pts) = (&self.map, &self.sim.state.points);
-        let d_of = |p: usize| self.sim.material_of(p).d_matrix();
-        let (ng, nb) = (map.groups.len(), self.band.len());
-        let gamma = self.sim.params.gamma_k;
-        self.pattern
-            .assemble_with(&map.dofs, &self.blocks(), |b, out| {
-                if b < ng {
-                    let g = &map.groups[b];
-                    match &self.ibm {
-                        Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
-                            let m2 = 2 * g.nodes.len();
-                            out.clear();
-                            out.resize(m2 * m2, 0.0);
-                            for &p in &g.points {
-                                let (bb, _) = s.point_b(map.stencils.get(p), pts.x[p]);
-                                ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
-                            }
-                        }
-                        _ => map.group_stiffness(g, pts, &d_of, out),
-                    }
-                } else if b < ng + nb {
-                    out.clear();
-                    out.extend_from_slice(&self.band[b - ng].1);
-                } else {
-                    self.faces[b - ng - nb].stiffness(if with_ghost { gamma } else { 0.0 }, out)
-                }
-            })
-            .map_err(|e| e.at_step(self.step))
+        let zero = vec![[0.0; 2]; self.frame.sim.model.grid.num_nodes()];
+        self.assembly.stiffness(&At {
+            frame: &self.frame,
+            d: &zero,
+            motion: &zero,
+            points: None,
+            stabilised: with_ghost,
+        })
     }
 }
 
@@ -299,10 +177,11 @@ struct System {
 
 /// `K` and the right-hand side `lambda1 f_ext - f_int - K_fc du_c - f_d`.
 fn assemble(setup: &Setup) -> Result<System, StepFailure> {
-    let (sim, map, pts) = (setup.sim, &setup.map, &setup.sim.state.points);
+    let frame = &setup.frame;
+    let (sim, map, pts) = (frame.sim, &frame.map, &frame.sim.state.points);
     let (k, coupling) = setup.stiffness(true)?;
-    let (mut forces, boundaries) = sim.nodal_forces(map, setup.step, setup.lambda1)?;
-    if let Some(s) = &setup.ibm {
+    let (mut forces, boundaries) = sim.nodal_forces(map, frame.step, frame.lambda1)?;
+    if let Some(s) = &frame.ibm {
         // Points inside a band work through B_bar: correct f_int.
         for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
             let st = map.stencils.get(p);
@@ -318,7 +197,7 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
             }
         }
     }
-    let lambda1 = setup.lambda1;
+    let lambda1 = frame.lambda1;
     let rhs: Vec<f64> = (0..map.dofs.n_free)
         .map(|i| lambda1 * forces.ext[i] - forces.int[i] - coupling[i])
         .collect();
@@ -344,7 +223,7 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
 /// volumes near boundaries) get up to two rounds of iterative refinement
 /// with the same factor, each recorded as a residual.
 fn solve(setup: &Setup, system: &System, factor: &linalg::Factor) -> Result<(Vec<f64>, Vec<f64>), StepFailure> {
-    let (sim, step) = (setup.sim, setup.step);
+    let (sim, step) = (setup.frame.sim, setup.frame.step);
     let (k, rhs, residual_norm) = (setup.k(system), &system.rhs, system.residual_norm);
     let rel_of = |v: &[f64]| {
         if residual_norm > 0.0 {
@@ -400,7 +279,7 @@ fn conditioning(
     factor: &linalg::Factor,
     residuals: &[f64],
 ) -> Result<(Option<Condition>, Option<Condition>), StepFailure> {
-    let sim = setup.sim;
+    let (sim, step) = (setup.frame.sim, setup.frame.step);
     let params = &sim.params;
     let k = setup.k(system);
     let how = |n: usize| match params.condition {
@@ -411,7 +290,7 @@ fn conditioning(
         ConditionMode::Off => None,
     };
     let cancelled = || StepFailure::Cancelled {
-        step: setup.step,
+        step,
         residuals: residuals.to_vec(),
     };
     let keep_going = || !sim.cancelled();
@@ -419,14 +298,14 @@ fn conditioning(
         return Ok((None, None));
     };
     let c = linalg::condition_by(k, factor, how, &keep_going).ok_or_else(cancelled)?;
-    if setup.faces.is_empty() {
+    if setup.frame.faces.is_empty() {
         return Ok((Some(c), None));
     }
     let (k0, _) = setup.stiffness(false)?;
-    let k0 = setup.pattern.matrix(&k0);
-    let c0 = match linalg::cholesky_within(k0, setup.sim.model.max_memory) {
+    let k0 = setup.assembly.matrix(&k0);
+    let c0 = match linalg::cholesky_within(k0, sim.model.max_memory) {
         Ok(f0) => linalg::condition_by(k0, &f0, how, &keep_going).ok_or_else(cancelled)?,
-        Err(e @ linalg::FactorError::Memory { .. }) => return Err(e.at_step(setup.step)),
+        Err(e @ linalg::FactorError::Memory { .. }) => return Err(e.at_step(step)),
         Err(_) => Condition {
             value: f64::INFINITY,
             lambda_min: 0.0,
@@ -444,25 +323,24 @@ struct Updated {
     strain_energy: f64,
     work: f64,
     ibm: Vec<IbmReport>,
-    max_increment: f64,
 }
 
 /// Update the points: `de = B du`, `s += D de`, `x += N du`,
 /// `V *= det(I + grad du)` (in a band `B_bar` and `D N d + N d^a`); the
 /// work of loads, supports and implicit boundaries; the stored energy.
 fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Result<Updated, StepFailure> {
-    let (sim, map, pts) = (setup.sim, &setup.map, &setup.sim.state.points);
-    let (step, lambda0, lambda1) = (setup.step, setup.lambda0, setup.lambda1);
+    let frame = &setup.frame;
+    let (sim, map, pts) = (frame.sim, &frame.map, &frame.sim.state.points);
+    let (step, lambda0, lambda1) = (frame.step, frame.lambda0, frame.lambda1);
     let forces = &system.forces;
     let d_of = |p: usize| sim.material_of(p).d_matrix();
     let nodal_d = nodal_increments(map, du);
     // Points move with N (d + d^a); those inside a band with D N d + N d^a.
-    let nodal = ibm::nodal_motion(&nodal_d, setup.ibm.as_ref());
-    let max_increment = nodal.iter().map(|u| u[0].hypot(u[1])).fold(0.0, f64::max);
+    let nodal = frame.motion(&nodal_d);
     let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal, step)?;
     let mut ibm_reports = Vec::new();
     let mut ibm_work = 0.0;
-    if let Some(s) = &setup.ibm {
+    if let Some(s) = &frame.ibm {
         for p in (0..points.len()).filter(|&p| s.in_band[p]) {
             let st = map.stencils.get(p);
             let (bb, plain) = s.point_b(st, pts.x[p]);
@@ -497,10 +375,10 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
         work += 0.5 * (lambda0 + lambda1) * forces.ext[i] * du[i];
     }
     for (c, &(n, comp, u)) in map.dofs.constrained.iter().enumerate() {
-        let total = u + setup.ibm.as_ref().map_or(0.0, |s| s.da[n][comp]);
+        let total = u + frame.ibm.as_ref().map_or(0.0, |s| s.da[n][comp]);
         work += 0.5 * (forces.int_fixed[c] + fint_fixed_new[c]) * total;
     }
-    if let Some(s) = &setup.ibm {
+    if let Some(s) = &frame.ibm {
         // Body forces also work on the prescribed field's motion N d^a.
         for (n, d) in map.dofs.node_dof.iter().enumerate() {
             for c in 0..2 {
@@ -529,7 +407,6 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
         strain_energy,
         work,
         ibm: ibm_reports,
-        max_increment,
     })
 }
 
@@ -657,8 +534,4 @@ fn residual_of(k: SparseRef<'_>, du: &[f64], rhs: &[f64]) -> Vec<f64> {
         .zip(rhs)
         .map(|(a, b)| a - b)
         .collect()
-}
-
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }

@@ -182,7 +182,10 @@ fn read_golden() -> BTreeMap<String, Summary> {
                     Some(c) => Value::Count(c.parse().unwrap_or_else(|_| panic!("{}", bad()))),
                     None => Value::Number(v.parse().unwrap_or_else(|_| panic!("{}", bad()))),
                 };
-                let slot = e.steps.get_mut(step.wrapping_sub(1)).unwrap_or_else(|| panic!("{}", bad()));
+                let slot = e
+                    .steps
+                    .get_mut(step.wrapping_sub(1))
+                    .unwrap_or_else(|| panic!("{}", bad()));
                 slot.insert(f[2].to_string(), value);
             }
         }
@@ -198,7 +201,10 @@ fn write_golden(all: &BTreeMap<String, Summary>) {
     );
     for (name, s) in all {
         let n = s.steps.len();
-        text += &format!("{name}\tend\t{}\n{name}\tkappa\t{:e}\n{name}\tsteps\t{n}\n", s.end, s.kappa);
+        text += &format!(
+            "{name}\tend\t{}\n{name}\tkappa\t{:e}\n{name}\tsteps\t{n}\n",
+            s.end, s.kappa
+        );
         let stride = n.div_ceil(100).max(1);
         for (i, step) in s.steps.iter().enumerate() {
             if (i + 1) % stride != 0 && i + 1 != n {
@@ -234,7 +240,11 @@ fn compare(name: &str, now: &Summary, gold: &Summary) -> Vec<String> {
         out.push(format!("{name}: ended `{}`, golden `{}`", now.end, gold.end));
     }
     if now.steps.len() != gold.steps.len() {
-        out.push(format!("{name}: {} steps, golden {}", now.steps.len(), gold.steps.len()));
+        out.push(format!(
+            "{name}: {} steps, golden {}",
+            now.steps.len(),
+            gold.steps.len()
+        ));
     }
     // The scale of each quantity: its largest magnitude over the scene.
     let mut scale: BTreeMap<&str, f64> = BTreeMap::new();
