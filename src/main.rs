@@ -3,6 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use mpmlab::format::{factor_label, relative_balance, sci_or_dash};
 use mpmlab::model::Limits;
 use mpmlab::record::Recorder;
 use mpmlab::runner::{Observer, RunEnd};
@@ -577,12 +578,8 @@ fn dynamics_header(first: &StepReport) -> String {
 fn dynamics_row(r: &StepReport) -> String {
     let d = r.dynamics.as_ref().expect("a dynamics report");
     let e = &r.energy;
-    let balance = if d.initial_energy > 0.0 {
-        format!("{:.3e}", d.energy_error / d.initial_energy)
-    } else {
-        "-".to_string()
-    };
-    let c = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3e}"));
+    let balance = sci_or_dash(relative_balance(d), 3);
+    let c = |v: Option<f64>| sci_or_dash(v, 3);
     let cond = d.conditioning.as_ref();
     let cfl = cond.and_then(|c| match d.mass {
         mpmlab::scene::MassKind::Stabilised => c.cfl_stabilised,
@@ -633,22 +630,6 @@ fn header(first: Option<&StepReport>) -> String {
     h
 }
 
-/// The factorisation of the step's last system and the tangent's inertia:
-/// `chol`, `ldlt-3` (3 negative pivots: 3 negative eigenvalues), `lu`.
-fn factor_label(r: &StepReport) -> String {
-    use mpmlab::solver::FactorKind;
-    match r
-        .solver
-        .as_ref()
-        .and_then(|s| s.factorisation.map(|f| (f, s.negative_pivots)))
-    {
-        None => "-".into(),
-        Some((FactorKind::Cholesky, _)) => "chol".into(),
-        Some((FactorKind::Ldlt, n)) => format!("ldlt-{}", n.unwrap_or(0)),
-        Some((FactorKind::Lu, _)) => "lu".into(),
-    }
-}
-
 fn row(r: &StepReport) -> String {
     let (cond, method) = r.condition.map_or(("-".to_string(), "off"), |c| {
         (format!("{:.3e}", c.value), c.method.label())
@@ -673,7 +654,8 @@ fn row(r: &StepReport) -> String {
         s.push_str(&format!(" {:>15.4e}", e.value));
     }
     let cuts = r.solver.as_ref().map_or(0, |s| s.cutbacks.len());
-    s.push_str(&format!(" {:>9} {:>4}", factor_label(r), cuts));
+    let factor = r.solver.as_ref().map_or("-".to_string(), factor_label);
+    s.push_str(&format!(" {:>9} {:>4}", factor, cuts));
     let t = &r.timings;
     s.push_str(&format!(
         " {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>7.4} {:>8.4}",

@@ -2,6 +2,7 @@
 
 use super::app::{App, ChartKind};
 use crate::colormap;
+use crate::format;
 use crate::simulation::{StepFailure, StepReport};
 use crate::units::{Quantity, Units};
 use ratatui::layout::{Constraint, Layout, Rect};
@@ -961,11 +962,7 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
         Line::raw(format!(
             "balance {:.3e} {en} ({} of W0 = {:.4e} {en})  max grid speed {:.3e} {vel}",
             d.energy_error,
-            if d.initial_energy > 0.0 {
-                format!("{:.2e}", d.energy_error / d.initial_energy)
-            } else {
-                "-".to_string()
-            },
+            format::sci_or_dash(format::relative_balance(d), 2),
             d.initial_energy,
             d.max_speed
         )),
@@ -976,7 +973,7 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
             c.mass_stabilised.value,
             c.mass_consistent.value,
             c.mass_lumped.value,
-            c.cfl_stabilised.map_or("-".to_string(), |v| format!("{v:.3e}"))
+            format::sci_or_dash(c.cfl_stabilised, 3)
         )));
     }
     if !d.cutbacks.is_empty() {
@@ -1072,15 +1069,9 @@ fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
 }
 
 /// The factorisation of the step's last system and the tangent's inertia,
-/// as in the run table: `chol`, `ldlt-3` (three negative pivots: a loss of
-/// stability or a spurious mode), `lu`; and the cutbacks taken.
+/// as in the run table ([`format::factor_label`]); and the cutbacks taken.
 fn solver_label(s: &crate::report::SolverReport) -> String {
-    use crate::solver::FactorKind;
-    let f = match (s.factorisation, s.negative_pivots) {
-        (None, _) => "-".to_string(),
-        (Some(FactorKind::Ldlt), Some(n)) => format!("ldlt-{n}"),
-        (Some(k), _) => k.label().replace("cholesky", "chol"),
-    };
+    let f = format::factor_label(s);
     match s.cutbacks.len() {
         0 => f,
         n => format!("{f} cut {n}"),
@@ -1180,8 +1171,7 @@ fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
             }),
             Cell::from(r.unknowns.to_string()),
             Cell::from(match &r.dynamics {
-                Some(d) if d.initial_energy > 0.0 => format!("{:.1e}", d.energy_error / d.initial_energy),
-                Some(_) => "-".to_string(),
+                Some(d) => format::sci_or_dash(format::relative_balance(d), 1),
                 None => format!("{:.1e}", r.residuals.last().copied().unwrap_or(f64::NAN)),
             }),
             Cell::from(r.condition.map_or("-".into(), |c| format!("{:.1e}", c.value))),
