@@ -5,9 +5,10 @@
 //! (`mpmlab::scene`, `mpmlab::Simulation`, ...). This crate holds what
 //! follows a run: the terminal UI ([`tui`]), the rerun recorder
 //! ([`record`]), the ParaView series ([`vtk`]), the probes' CSV files
-//! ([`csv`]) and parameter sweeps ([`sweep`]). They only read reports and
-//! state through [`runner::Observer`]; the engine cannot import them (it
-//! does not depend on this crate or its libraries).
+//! ([`csv`]) and parameter sweeps ([`sweep`]), with the formatters they
+//! share ([`format`]). They only read reports and state through
+//! [`runner::Observer`]; the engine cannot import them (it does not depend
+//! on this crate or its libraries).
 
 // Every public module and item of the engine, so a module the engine
 // adds is here without a list to keep.
@@ -15,6 +16,7 @@ pub use mpmlab_engine::*;
 
 pub mod colormap;
 pub mod csv;
+pub mod format;
 pub mod record;
 pub mod sweep;
 pub mod tui;

@@ -145,7 +145,7 @@ impl std::fmt::Display for VtkSummary {
             "{} (open points.pvd in ParaView): {} states, {}",
             self.dir.display(),
             self.frames,
-            crate::record::human_bytes(self.bytes as f64)
+            crate::format::human_bytes(self.bytes as f64)
         )?;
         if self.skipped > 0 {
             write!(f, "; {} states with non-finite values not written", self.skipped)?;

@@ -69,6 +69,7 @@ pub mod sweep;
 
 use crate::colormap;
 use crate::field::Field;
+use crate::format::human_bytes;
 use crate::model::record::{Plan, RecordSettings};
 use crate::simulation::{Simulation, StepFailure, StepReport};
 use layout::{order, titled, Contents, Quantity};
@@ -418,19 +419,6 @@ impl std::fmt::Display for RecordingSize {
             self.frames,
             self.bytes_per_point_frame()
         )
-    }
-}
-
-/// `12.3 MB`, `45.6 kB`, `789 B`.
-pub fn human_bytes(b: f64) -> String {
-    if b >= 1e9 {
-        format!("{:.2} GB", b / 1e9)
-    } else if b >= 1e6 {
-        format!("{:.1} MB", b / 1e6)
-    } else if b >= 1e3 {
-        format!("{:.1} kB", b / 1e3)
-    } else {
-        format!("{b:.0} B")
     }
 }
 
@@ -1017,11 +1005,8 @@ impl Recorder {
         self.scalar("metrics/energy/kinetic_grid", d.kinetic_grid)?;
         self.scalar("metrics/energy/total", e.kinetic + e.strain)?;
         self.scalar("metrics/energy/balance_error", d.energy_error)?;
-        if d.initial_energy > 0.0 {
-            self.scalar(
-                "metrics/energy/balance_error_relative",
-                d.energy_error / d.initial_energy,
-            )?;
+        if let Some(b) = crate::format::relative_balance(d) {
+            self.scalar("metrics/energy/balance_error_relative", b)?;
         }
         self.scalar("metrics/momentum/x", d.momentum[0])?;
         self.scalar("metrics/momentum/y", d.momentum[1])?;

@@ -465,19 +465,7 @@ impl App {
 
     fn act(&mut self, action: Action) -> Option<Command> {
         match action {
-            Action::Step => {
-                if self.busy {
-                    self.status = "a step is running".into();
-                    None
-                } else if self.finished() {
-                    self.status = format!("all {} load steps done (q quits)", self.view.load_steps);
-                    None
-                } else {
-                    self.busy = true;
-                    self.status = format!("computing step {}...", self.view.step + 1);
-                    Some(Command::Step)
-                }
-            }
+            Action::Step => self.request_step(),
             Action::ToggleHelp => {
                 self.show_help = !self.show_help;
                 None
@@ -486,76 +474,11 @@ impl App {
                 self.show_control = !self.show_control;
                 None
             }
-            Action::RaiseGammaK | Action::LowerGammaK | Action::ToggleGhost => {
-                if self.busy {
-                    self.status = "wait for the step to finish before changing gamma_K".into();
-                    return None;
-                }
-                let g = self.params.gamma_k;
-                let new = match action {
-                    Action::RaiseGammaK if g == 0.0 => 1e-6 * self.modulus,
-                    Action::RaiseGammaK => 10.0 * g,
-                    Action::LowerGammaK => g / 10.0,
-                    _ if g > 0.0 => 0.0,
-                    _ => self.last_gamma,
-                };
-                if new > 0.0 {
-                    self.last_gamma = new;
-                }
-                self.status = format!("gamma_K = {new:.3e} Pa from the next step");
-                Some(Command::SetGammaK(new))
-            }
-            Action::RaiseDelta | Action::LowerDelta => {
-                if self.busy {
-                    self.status = "wait for the step to finish before changing delta".into();
-                    return None;
-                }
-                let d = self.params.delta_over_h;
-                let new = if action == Action::RaiseDelta {
-                    (10.0 * d).min(1.0)
-                } else {
-                    (d / 10.0).max(1e-16)
-                };
-                self.status = format!("delta/h = {new:.1e} from the next step");
-                Some(Command::SetDeltaOverH(new))
-            }
-            Action::RaiseGammaM | Action::LowerGammaM => {
-                if self.busy && !self.running {
-                    self.status = "wait for the step to finish before changing gamma_M".into();
-                    return None;
-                }
-                let g = self.params.gamma_m;
-                let new = match action {
-                    Action::RaiseGammaM if g == 0.0 => self.default_gamma_m,
-                    Action::RaiseGammaM => 10.0 * g,
-                    _ => g / 10.0,
-                };
-                self.status = format!("gamma_M = {new:.3e} kg/m^3 from the next step");
-                Some(Command::SetGammaM(new))
-            }
-            Action::RunPause => {
-                self.running = !self.running;
-                self.status = if self.running {
-                    "running (enter pauses)"
-                } else {
-                    "paused"
-                }
-                .into();
-                self.pending()
-            }
-            Action::Redo => {
-                if self.busy {
-                    self.status = "wait for the step to finish before redoing it".into();
-                    None
-                } else if self.reports.is_empty() && self.failure.is_none() {
-                    self.status = "no step to redo yet".into();
-                    None
-                } else {
-                    self.busy = true;
-                    self.status = "redoing the last step with the current parameters...".into();
-                    Some(Command::Redo)
-                }
-            }
+            Action::RaiseGammaK | Action::LowerGammaK | Action::ToggleGhost => self.change_gamma_k(action),
+            Action::RaiseDelta | Action::LowerDelta => self.change_delta(action),
+            Action::RaiseGammaM | Action::LowerGammaM => self.change_gamma_m(action),
+            Action::RunPause => self.run_pause(),
+            Action::Redo => self.request_redo(),
             Action::Cancel => {
                 self.running = false;
                 if self.busy {
@@ -565,16 +488,7 @@ impl App {
                     None
                 }
             }
-            Action::RaiseTolerance | Action::LowerTolerance => {
-                let t = self.params.tolerance;
-                let new = if action == Action::RaiseTolerance {
-                    (10.0 * t).min(0.1)
-                } else {
-                    (t / 10.0).max(1e-16)
-                };
-                self.status = format!("tolerance = {new:.1e} from the next step");
-                Some(Command::SetTolerance(new))
-            }
+            Action::RaiseTolerance | Action::LowerTolerance => self.change_tolerance(action),
             Action::OpenInput => {
                 self.input = Some(String::new());
                 self.status = "type name = value (gamma_k, gamma_m, delta_over_h, tolerance, max_iterations), enter sets it, Esc cancels".into();
@@ -592,53 +506,10 @@ impl App {
                 }
                 None
             }
-            Action::Submit => {
-                let text = self.input.take().unwrap_or_default();
-                match parse_setting(&text) {
-                    Ok(cmd) => {
-                        self.status = format!("{} from the next step", text.trim());
-                        Some(cmd)
-                    }
-                    Err(e) => {
-                        self.status = e;
-                        None
-                    }
-                }
-            }
-            Action::CloseOverlay => {
-                self.input = None;
-                self.show_help = false;
-                self.show_failure = false;
-                self.redo = None;
-                if self.confirm_quit {
-                    self.confirm_quit = false;
-                    self.status = "not quitting".into();
-                }
-                None
-            }
-            Action::ZoomIn | Action::ZoomOut | Action::ResetView => {
-                self.zoom = match action {
-                    Action::ZoomIn => (self.zoom * 2.0).min(1024.0),
-                    Action::ZoomOut => (self.zoom / 2.0).max(1.0),
-                    _ => 1.0,
-                };
-                if action == Action::ResetView || self.zoom == 1.0 {
-                    self.pan = [0.0; 2];
-                }
-                None
-            }
-            Action::PanLeft | Action::PanRight | Action::PanUp | Action::PanDown => {
-                // A fifth of the visible extent of the larger grid side.
-                let step = 0.2 * (self.grid.nx.max(self.grid.ny) as f64 * self.grid.h) / self.zoom;
-                let (dx, dy) = match action {
-                    Action::PanLeft => (-step, 0.0),
-                    Action::PanRight => (step, 0.0),
-                    Action::PanUp => (0.0, step),
-                    _ => (0.0, -step),
-                };
-                self.pan = [self.pan[0] + dx, self.pan[1] + dy];
-                None
-            }
+            Action::Submit => self.submit_input(),
+            Action::CloseOverlay => self.close_overlay(),
+            Action::ZoomIn | Action::ZoomOut | Action::ResetView => self.change_zoom(action),
+            Action::PanLeft | Action::PanRight | Action::PanUp | Action::PanDown => self.move_view(action),
             Action::ToggleGrid => {
                 self.show_grid = !self.show_grid;
                 None
@@ -671,33 +542,201 @@ impl App {
                     Some(Command::Checkpoint)
                 }
             }
-            Action::NextProbeY | Action::NextProbeX => {
-                let n = self.probe_columns().len();
-                let axis = if action == Action::NextProbeY {
-                    &mut self.probe_y
-                } else {
-                    &mut self.probe_x
-                };
-                *axis = (*axis + 1) % n;
-                if !self.probes_start.is_empty() {
-                    self.chart = ChartKind::Probe;
-                }
-                None
-            }
+            Action::NextProbeY | Action::NextProbeX => self.next_probe_axis(action),
             Action::NextField => {
                 let k = Field::ALL.iter().position(|f| *f == self.view.field).unwrap_or(0);
                 Some(Command::SetField(Field::ALL[(k + 1) % Field::ALL.len()]))
             }
-            Action::Quit => {
-                if (self.busy || self.running) && !self.confirm_quit {
-                    self.confirm_quit = true;
-                    self.status = "a step is running: q again quits (the recording is closed), Esc stays".into();
-                    return None;
-                }
-                self.quit = true;
-                Some(Command::Quit)
+            Action::Quit => self.request_quit(),
+        }
+    }
+
+    /// Step once, unless a step is running or every step is done.
+    fn request_step(&mut self) -> Option<Command> {
+        if self.busy {
+            self.status = "a step is running".into();
+            None
+        } else if self.finished() {
+            self.status = format!("all {} load steps done (q quits)", self.view.load_steps);
+            None
+        } else {
+            self.busy = true;
+            self.status = format!("computing step {}...", self.view.step + 1);
+            Some(Command::Step)
+        }
+    }
+
+    /// gamma_K ten times up or down, or the ghost penalty off and on again.
+    fn change_gamma_k(&mut self, action: Action) -> Option<Command> {
+        if self.busy {
+            self.status = "wait for the step to finish before changing gamma_K".into();
+            return None;
+        }
+        let g = self.params.gamma_k;
+        let new = match action {
+            Action::RaiseGammaK if g == 0.0 => 1e-6 * self.modulus,
+            Action::RaiseGammaK => 10.0 * g,
+            Action::LowerGammaK => g / 10.0,
+            _ if g > 0.0 => 0.0,
+            _ => self.last_gamma,
+        };
+        if new > 0.0 {
+            self.last_gamma = new;
+        }
+        self.status = format!("gamma_K = {new:.3e} Pa from the next step");
+        Some(Command::SetGammaK(new))
+    }
+
+    /// delta/h ten times up or down, within 1e-16 ..= 1.
+    fn change_delta(&mut self, action: Action) -> Option<Command> {
+        if self.busy {
+            self.status = "wait for the step to finish before changing delta".into();
+            return None;
+        }
+        let d = self.params.delta_over_h;
+        let new = if action == Action::RaiseDelta {
+            (10.0 * d).min(1.0)
+        } else {
+            (d / 10.0).max(1e-16)
+        };
+        self.status = format!("delta/h = {new:.1e} from the next step");
+        Some(Command::SetDeltaOverH(new))
+    }
+
+    /// gamma_M ten times up or down (from zero: the default).
+    fn change_gamma_m(&mut self, action: Action) -> Option<Command> {
+        if self.busy && !self.running {
+            self.status = "wait for the step to finish before changing gamma_M".into();
+            return None;
+        }
+        let g = self.params.gamma_m;
+        let new = match action {
+            Action::RaiseGammaM if g == 0.0 => self.default_gamma_m,
+            Action::RaiseGammaM => 10.0 * g,
+            _ => g / 10.0,
+        };
+        self.status = format!("gamma_M = {new:.3e} kg/m^3 from the next step");
+        Some(Command::SetGammaM(new))
+    }
+
+    /// Step on and on, or pause.
+    fn run_pause(&mut self) -> Option<Command> {
+        self.running = !self.running;
+        self.status = if self.running {
+            "running (enter pauses)"
+        } else {
+            "paused"
+        }
+        .into();
+        self.pending()
+    }
+
+    /// The last step again with the current parameters.
+    fn request_redo(&mut self) -> Option<Command> {
+        if self.busy {
+            self.status = "wait for the step to finish before redoing it".into();
+            None
+        } else if self.reports.is_empty() && self.failure.is_none() {
+            self.status = "no step to redo yet".into();
+            None
+        } else {
+            self.busy = true;
+            self.status = "redoing the last step with the current parameters...".into();
+            Some(Command::Redo)
+        }
+    }
+
+    /// The Newton tolerance ten times up or down, within 1e-16 ..= 0.1.
+    fn change_tolerance(&mut self, action: Action) -> Option<Command> {
+        let t = self.params.tolerance;
+        let new = if action == Action::RaiseTolerance {
+            (10.0 * t).min(0.1)
+        } else {
+            (t / 10.0).max(1e-16)
+        };
+        self.status = format!("tolerance = {new:.1e} from the next step");
+        Some(Command::SetTolerance(new))
+    }
+
+    /// The typed `name = value` as a command.
+    fn submit_input(&mut self) -> Option<Command> {
+        let text = self.input.take().unwrap_or_default();
+        match parse_setting(&text) {
+            Ok(cmd) => {
+                self.status = format!("{} from the next step", text.trim());
+                Some(cmd)
+            }
+            Err(e) => {
+                self.status = e;
+                None
             }
         }
+    }
+
+    /// Close whatever is open over the screen (and a pending quit).
+    fn close_overlay(&mut self) -> Option<Command> {
+        self.input = None;
+        self.show_help = false;
+        self.show_failure = false;
+        self.redo = None;
+        if self.confirm_quit {
+            self.confirm_quit = false;
+            self.status = "not quitting".into();
+        }
+        None
+    }
+
+    /// Zoom in, out (up to 1024 times) or back to the whole grid.
+    fn change_zoom(&mut self, action: Action) -> Option<Command> {
+        self.zoom = match action {
+            Action::ZoomIn => (self.zoom * 2.0).min(1024.0),
+            Action::ZoomOut => (self.zoom / 2.0).max(1.0),
+            _ => 1.0,
+        };
+        if action == Action::ResetView || self.zoom == 1.0 {
+            self.pan = [0.0; 2];
+        }
+        None
+    }
+
+    /// Move the view by a fifth of its extent.
+    fn move_view(&mut self, action: Action) -> Option<Command> {
+        // A fifth of the visible extent of the larger grid side.
+        let step = 0.2 * (self.grid.nx.max(self.grid.ny) as f64 * self.grid.h) / self.zoom;
+        let (dx, dy) = match action {
+            Action::PanLeft => (-step, 0.0),
+            Action::PanRight => (step, 0.0),
+            Action::PanUp => (0.0, step),
+            _ => (0.0, -step),
+        };
+        self.pan = [self.pan[0] + dx, self.pan[1] + dy];
+        None
+    }
+
+    /// The next probe column on the probe chart's y or x axis.
+    fn next_probe_axis(&mut self, action: Action) -> Option<Command> {
+        let n = self.probe_columns().len();
+        let axis = if action == Action::NextProbeY {
+            &mut self.probe_y
+        } else {
+            &mut self.probe_x
+        };
+        *axis = (*axis + 1) % n;
+        if !self.probes_start.is_empty() {
+            self.chart = ChartKind::Probe;
+        }
+        None
+    }
+
+    /// Quit; while a step runs, only when asked twice.
+    fn request_quit(&mut self) -> Option<Command> {
+        if (self.busy || self.running) && !self.confirm_quit {
+            self.confirm_quit = true;
+            self.status = "a step is running: q again quits (the recording is closed), Esc stays".into();
+            return None;
+        }
+        self.quit = true;
+        Some(Command::Quit)
     }
 
     /// Take an update from the engine.

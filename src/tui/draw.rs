@@ -2,6 +2,7 @@
 
 use super::app::{App, ChartKind};
 use crate::colormap;
+use crate::format;
 use crate::simulation::{StepFailure, StepReport};
 use crate::units::{Quantity, Units};
 use ratatui::layout::{Constraint, Layout, Rect};
@@ -252,18 +253,39 @@ fn draw_redo(frame: &mut Frame, area: Rect, outcomes: &(super::app::Outcome, sup
     );
 }
 
-fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
-    let g = &app.grid;
-    let max = g.max();
+/// The points binned by colour (each bin is one `Points` shape), and the
+/// field's range.
+fn colour_bins(app: &App) -> (Vec<Vec<(f64, f64)>>, f64, f64) {
     let (lo, hi) = colormap::range(app.view.values.iter().copied());
-    // Bin points by colour so each bin is one `Points` shape.
     let mut bins: Vec<Vec<(f64, f64)>> = vec![Vec::new(); BINS];
     for (x, v) in app.view.positions.iter().zip(&app.view.values) {
         let t = colormap::unit(*v, lo, hi);
         let b = ((t * BINS as f64) as usize).min(BINS - 1);
         bins[b].push((x[0], x[1]));
     }
-    // Keep cells square: pad the shorter extent (terminal cells are ~1:2).
+    (bins, lo, hi)
+}
+
+/// The colour bar: the field's range through the colour map, low to high.
+fn colour_legend(label: &str, lo: f64, hi: f64) -> Line<'static> {
+    let mut legend = vec![Span::raw(format!(" {label} {lo:.3e} "))];
+    for k in 0..12 {
+        let [r, gg, bb] = colormap::viridis((k as f64 + 0.5) / 12.0);
+        legend.push(Span::styled("█", Style::new().fg(Color::Rgb(r, gg, bb))));
+    }
+    legend.push(Span::raw(if hi > lo {
+        format!(" {hi:.3e} ")
+    } else {
+        " (uniform) ".to_string()
+    }));
+    Line::from(legend)
+}
+
+/// The canvas's x and y bounds: the grid, zoomed and panned, with square
+/// cells (the shorter extent padded; terminal cells are ~1:2).
+fn canvas_bounds(app: &App, area: Rect) -> ([f64; 2], [f64; 2]) {
+    let g = &app.grid;
+    let max = g.max();
     let (w, h) = (max[0] - g.origin[0], max[1] - g.origin[1]);
     let inner = (
         area.width.saturating_sub(2).max(1) as f64,
@@ -275,18 +297,117 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
         0.5 * (g.origin[1] + max[1]) + app.pan[1],
     );
     let (hw, hh) = (0.5 * scale * inner.0 / app.zoom, 0.5 * scale * inner.1 / app.zoom);
-    // The colour bar: the field's range through the colour map, low to high.
-    let mut legend = vec![Span::raw(format!(" {} {lo:.3e} ", app.view.label))];
-    for k in 0..12 {
-        let [r, gg, bb] = colormap::viridis((k as f64 + 0.5) / 12.0);
-        legend.push(Span::styled("█", Style::new().fg(Color::Rgb(r, gg, bb))));
+    ([cx - hw, cx + hw], [cy - hh, cy + hh])
+}
+
+/// The bottom layer: grid lines (thinned on dense grids) and supports.
+fn paint_grid(ctx: &mut ratatui::widgets::canvas::Context, app: &App) {
+    let g = &app.grid;
+    let max = g.max();
+    let grid_color = Color::DarkGray;
+    let dense = g.nx + g.ny > 400;
+    let step_i = if dense { g.nx.div_ceil(50).max(1) } else { 1 };
+    let step_j = if dense { g.ny.div_ceil(50).max(1) } else { 1 };
+    if app.show_grid {
+        for i in (0..=g.nx).step_by(step_i).chain([g.nx]) {
+            let x = g.origin[0] + i as f64 * g.h;
+            ctx.draw(&CLine::new(x, g.origin[1], x, max[1], grid_color));
+        }
+        for j in (0..=g.ny).step_by(step_j).chain([g.ny]) {
+            let y = g.origin[1] + j as f64 * g.h;
+            ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
+        }
     }
-    legend.push(Span::raw(if hi > lo {
-        format!(" {hi:.3e} ")
-    } else {
-        " (uniform) ".to_string()
-    }));
-    let legend = Line::from(legend);
+    // Grid supports (magenta lines; a supported node as a cross), with
+    // the grid: the layers above (active cells, boundaries) show over them.
+    let support = Color::Magenta;
+    for (a, b) in &app.view.supports {
+        if a == b {
+            let d = 0.25 * g.h;
+            ctx.draw(&CLine::new(a[0] - d, a[1] - d, a[0] + d, a[1] + d, support));
+            ctx.draw(&CLine::new(a[0] - d, a[1] + d, a[0] + d, a[1] - d, support));
+        } else {
+            ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], support));
+        }
+    }
+}
+
+/// The middle layer: active and cut cells, implicit boundaries, point
+/// loads, ghost faces, B-spline boundaries and their names.
+fn paint_shapes(ctx: &mut ratatui::widgets::canvas::Context, app: &App) {
+    let g = &app.grid;
+    // Outlines of cells `c` in a colour.
+    let outline = |ctx: &mut ratatui::widgets::canvas::Context, cells: &[usize], col: Color| {
+        for &c in cells {
+            let m = g.cell_min(c % g.nx, c / g.nx);
+            let (x0, y0, x1, y1) = (m[0], m[1], m[0] + g.h, m[1] + g.h);
+            ctx.draw(&CLine::new(x0, y0, x1, y0, col));
+            ctx.draw(&CLine::new(x1, y0, x1, y1, col));
+            ctx.draw(&CLine::new(x1, y1, x0, y1, col));
+            ctx.draw(&CLine::new(x0, y1, x0, y0, col));
+        }
+    };
+    if app.show_active {
+        outline(ctx, &app.view.active_cells, Color::Rgb(60, 120, 200));
+    }
+    outline(ctx, &app.view.cut_cells, Color::Rgb(0, 110, 120));
+    for line in &app.view.ibm {
+        for w in line.windows(2) {
+            ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], Color::Cyan));
+        }
+    }
+    // Point loads: an arrow two cells long pointing at the point.
+    for (p, d) in &app.view.loads {
+        let l = 2.0 * g.h;
+        let tail = [p[0] - l * d[0], p[1] - l * d[1]];
+        ctx.draw(&CLine::new(tail[0], tail[1], p[0], p[1], Color::LightRed));
+        let (c, s) = (0.3 * g.h, 0.15 * g.h);
+        for sign in [-1.0, 1.0] {
+            let head = [p[0] - c * d[0] - sign * s * d[1], p[1] - c * d[1] + sign * s * d[0]];
+            ctx.draw(&CLine::new(head[0], head[1], p[0], p[1], Color::LightRed));
+        }
+    }
+    if app.show_ghost_faces {
+        for (a, b) in &app.view.ghost_faces {
+            ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], Color::Rgb(240, 140, 20)));
+        }
+    }
+    for bv in &app.view.boundaries {
+        let color = if bv.loaded { Color::LightRed } else { Color::White };
+        for w in bv.curve.windows(2) {
+            ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], color));
+        }
+    }
+    if app.show_control {
+        let coords: Vec<(f64, f64)> = app
+            .view
+            .boundaries
+            .iter()
+            .flat_map(|b| b.control.iter().map(|p| (p[0], p[1])))
+            .collect();
+        ctx.draw(&Points {
+            coords: &coords,
+            color: Color::Yellow,
+        });
+    }
+    // Names of the implicit boundaries (at their first vertex) and
+    // of the B-spline boundaries (at the middle of their curve).
+    for (line, name) in app.view.ibm.iter().zip(&app.view.ibm_names) {
+        if let Some(p) = line.first() {
+            ctx.print(p[0], p[1], Span::styled(name.clone(), Style::new().fg(Color::Cyan)));
+        }
+    }
+    for bv in &app.view.boundaries {
+        if let Some(p) = bv.curve.get(bv.curve.len() / 2) {
+            let color = if bv.loaded { Color::LightRed } else { Color::White };
+            ctx.print(p[0], p[1], Span::styled(bv.name.clone(), Style::new().fg(color)));
+        }
+    }
+}
+
+fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
+    let (bins, lo, hi) = colour_bins(app);
+    let (x_bounds, y_bounds) = canvas_bounds(app, area);
     let canvas = Canvas::default()
         .block(
             Block::default()
@@ -296,106 +417,15 @@ fn draw_canvas(frame: &mut Frame, app: &App, area: Rect) {
                 } else {
                     " points ".to_string()
                 })
-                .title_bottom(legend),
+                .title_bottom(colour_legend(&app.view.label, lo, hi)),
         )
         .marker(Marker::Braille)
-        .x_bounds([cx - hw, cx + hw])
-        .y_bounds([cy - hh, cy + hh])
+        .x_bounds(x_bounds)
+        .y_bounds(y_bounds)
         .paint(move |ctx| {
-            let grid_color = Color::DarkGray;
-            let dense = g.nx + g.ny > 400;
-            let step_i = if dense { g.nx.div_ceil(50).max(1) } else { 1 };
-            let step_j = if dense { g.ny.div_ceil(50).max(1) } else { 1 };
-            if app.show_grid {
-                for i in (0..=g.nx).step_by(step_i).chain([g.nx]) {
-                    let x = g.origin[0] + i as f64 * g.h;
-                    ctx.draw(&CLine::new(x, g.origin[1], x, max[1], grid_color));
-                }
-                for j in (0..=g.ny).step_by(step_j).chain([g.ny]) {
-                    let y = g.origin[1] + j as f64 * g.h;
-                    ctx.draw(&CLine::new(g.origin[0], y, max[0], y, grid_color));
-                }
-            }
-            // Grid supports (magenta lines; a supported node as a cross), with
-            // the grid: the layers above (active cells, boundaries) show over them.
-            let support = Color::Magenta;
-            for (a, b) in &app.view.supports {
-                if a == b {
-                    let d = 0.25 * g.h;
-                    ctx.draw(&CLine::new(a[0] - d, a[1] - d, a[0] + d, a[1] + d, support));
-                    ctx.draw(&CLine::new(a[0] - d, a[1] + d, a[0] + d, a[1] - d, support));
-                } else {
-                    ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], support));
-                }
-            }
+            paint_grid(ctx, app);
             ctx.layer();
-            // Outlines of cells `c` in a colour.
-            let outline = |ctx: &mut ratatui::widgets::canvas::Context, cells: &[usize], col: Color| {
-                for &c in cells {
-                    let m = g.cell_min(c % g.nx, c / g.nx);
-                    let (x0, y0, x1, y1) = (m[0], m[1], m[0] + g.h, m[1] + g.h);
-                    ctx.draw(&CLine::new(x0, y0, x1, y0, col));
-                    ctx.draw(&CLine::new(x1, y0, x1, y1, col));
-                    ctx.draw(&CLine::new(x1, y1, x0, y1, col));
-                    ctx.draw(&CLine::new(x0, y1, x0, y0, col));
-                }
-            };
-            if app.show_active {
-                outline(ctx, &app.view.active_cells, Color::Rgb(60, 120, 200));
-            }
-            outline(ctx, &app.view.cut_cells, Color::Rgb(0, 110, 120));
-            for line in &app.view.ibm {
-                for w in line.windows(2) {
-                    ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], Color::Cyan));
-                }
-            }
-            // Point loads: an arrow two cells long pointing at the point.
-            for (p, d) in &app.view.loads {
-                let l = 2.0 * g.h;
-                let tail = [p[0] - l * d[0], p[1] - l * d[1]];
-                ctx.draw(&CLine::new(tail[0], tail[1], p[0], p[1], Color::LightRed));
-                let (c, s) = (0.3 * g.h, 0.15 * g.h);
-                for sign in [-1.0, 1.0] {
-                    let head = [p[0] - c * d[0] - sign * s * d[1], p[1] - c * d[1] + sign * s * d[0]];
-                    ctx.draw(&CLine::new(head[0], head[1], p[0], p[1], Color::LightRed));
-                }
-            }
-            if app.show_ghost_faces {
-                for (a, b) in &app.view.ghost_faces {
-                    ctx.draw(&CLine::new(a[0], a[1], b[0], b[1], Color::Rgb(240, 140, 20)));
-                }
-            }
-            for bv in &app.view.boundaries {
-                let color = if bv.loaded { Color::LightRed } else { Color::White };
-                for w in bv.curve.windows(2) {
-                    ctx.draw(&CLine::new(w[0][0], w[0][1], w[1][0], w[1][1], color));
-                }
-            }
-            if app.show_control {
-                let coords: Vec<(f64, f64)> = app
-                    .view
-                    .boundaries
-                    .iter()
-                    .flat_map(|b| b.control.iter().map(|p| (p[0], p[1])))
-                    .collect();
-                ctx.draw(&Points {
-                    coords: &coords,
-                    color: Color::Yellow,
-                });
-            }
-            // Names of the implicit boundaries (at their first vertex) and
-            // of the B-spline boundaries (at the middle of their curve).
-            for (line, name) in app.view.ibm.iter().zip(&app.view.ibm_names) {
-                if let Some(p) = line.first() {
-                    ctx.print(p[0], p[1], Span::styled(name.clone(), Style::new().fg(Color::Cyan)));
-                }
-            }
-            for bv in &app.view.boundaries {
-                if let Some(p) = bv.curve.get(bv.curve.len() / 2) {
-                    let color = if bv.loaded { Color::LightRed } else { Color::White };
-                    ctx.print(p[0], p[1], Span::styled(bv.name.clone(), Style::new().fg(color)));
-                }
-            }
+            paint_shapes(ctx, app);
             ctx.layer();
             for (b, coords) in bins.iter().enumerate() {
                 if coords.is_empty() {
@@ -961,11 +991,7 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
         Line::raw(format!(
             "balance {:.3e} {en} ({} of W0 = {:.4e} {en})  max grid speed {:.3e} {vel}",
             d.energy_error,
-            if d.initial_energy > 0.0 {
-                format!("{:.2e}", d.energy_error / d.initial_energy)
-            } else {
-                "-".to_string()
-            },
+            format::sci_or_dash(format::relative_balance(d), 2),
             d.initial_energy,
             d.max_speed
         )),
@@ -976,7 +1002,7 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
             c.mass_stabilised.value,
             c.mass_consistent.value,
             c.mass_lumped.value,
-            c.cfl_stabilised.map_or("-".to_string(), |v| format!("{v:.3e}"))
+            format::sci_or_dash(c.cfl_stabilised, 3)
         )));
     }
     if !d.cutbacks.is_empty() {
@@ -1072,15 +1098,9 @@ fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
 }
 
 /// The factorisation of the step's last system and the tangent's inertia,
-/// as in the run table: `chol`, `ldlt-3` (three negative pivots: a loss of
-/// stability or a spurious mode), `lu`; and the cutbacks taken.
+/// as in the run table ([`format::factor_label`]); and the cutbacks taken.
 fn solver_label(s: &crate::report::SolverReport) -> String {
-    use crate::solver::FactorKind;
-    let f = match (s.factorisation, s.negative_pivots) {
-        (None, _) => "-".to_string(),
-        (Some(FactorKind::Ldlt), Some(n)) => format!("ldlt-{n}"),
-        (Some(k), _) => k.label().replace("cholesky", "chol"),
-    };
+    let f = format::factor_label(s);
     match s.cutbacks.len() {
         0 => f,
         n => format!("{f} cut {n}"),
@@ -1180,8 +1200,7 @@ fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
             }),
             Cell::from(r.unknowns.to_string()),
             Cell::from(match &r.dynamics {
-                Some(d) if d.initial_energy > 0.0 => format!("{:.1e}", d.energy_error / d.initial_energy),
-                Some(_) => "-".to_string(),
+                Some(d) => format::sci_or_dash(format::relative_balance(d), 1),
                 None => format!("{:.1e}", r.residuals.last().copied().unwrap_or(f64::NAN)),
             }),
             Cell::from(r.condition.map_or("-".into(), |c| format!("{:.1e}", c.value))),

@@ -82,6 +82,79 @@ fn set_params(
     let _ = updates.send(Update::Params(params));
 }
 
+/// The parameters with a `Set...` command's change, and the change in
+/// words (`None` for any other command).
+fn changed_params(sim: &Simulation, cmd: &Command) -> Option<(crate::simulation::Params, String)> {
+    let mut params = sim.params().clone();
+    let what = match *cmd {
+        Command::SetGammaK(g) => {
+            params.gamma_k = g;
+            format!("gamma_K = {g:e} {}", sim.model().units.of(Quantity::Stress))
+        }
+        Command::SetDeltaOverH(d) => {
+            params.delta_over_h = d;
+            format!("delta/h = {d:e}")
+        }
+        Command::SetGammaM(g) => {
+            params.gamma_m = g;
+            format!("gamma_M = {g:e} {}", sim.model().units.of(Quantity::Density))
+        }
+        Command::SetTolerance(t) => {
+            params.tolerance = t;
+            format!("tolerance = {t:e}")
+        }
+        Command::SetMaxIterations(n) => {
+            params.max_iterations = n;
+            format!("max_iterations = {n}")
+        }
+        _ => return None,
+    };
+    Some((params, what))
+}
+
+/// `w`: a checkpoint of the current state into `checkpoints/`; what
+/// happened, in words.
+fn write_checkpoint(sim: &Simulation, scene_text: &str) -> String {
+    let dir = std::path::Path::new("checkpoints");
+    let path = dir.join(format!("{}-step-{:06}.ckpt", sim.model().name, sim.step_index()));
+    let result = std::fs::create_dir_all(dir)
+        .map_err(|e| format!("cannot create {}: {e}", dir.display()))
+        .and_then(|_| sim.save_checkpoint(&path, scene_text).map_err(|e| e.to_string()));
+    match result {
+        Ok(()) => format!(
+            "checkpoint of step {} written to {} (continue from it: mpmlab tui SCENE --resume {})",
+            sim.step_index(),
+            path.display(),
+            path.display()
+        ),
+        Err(e) => e,
+    }
+}
+
+/// `V`: start a ParaView series from the current step, or close the one
+/// being written; what happened, in words.
+fn toggle_vtk(sim: &Simulation, vtk: &mut Option<crate::vtk::VtkExport>) -> String {
+    match vtk.take() {
+        Some(v) => match v.finish(sim) {
+            Ok(summary) => format!("ParaView series closed: {summary}"),
+            Err(e) => e.to_string(),
+        },
+        None => {
+            let dir = std::path::PathBuf::from(format!("vtk/{}-from-step-{}", sim.model().name, sim.step_index()));
+            match crate::vtk::VtkExport::create(&dir, sim, 1) {
+                Ok(v) => {
+                    *vtk = Some(v);
+                    format!(
+                        "ParaView series: every step from here into {} (V stops; open points.pvd)",
+                        dir.display()
+                    )
+                }
+                Err(e) => e.to_string(),
+            }
+        }
+    }
+}
+
 /// The engine thread: steps the simulation, records, reports back.
 fn engine(
     mut sim: Simulation,
@@ -156,75 +229,19 @@ fn engine(
             | Command::SetGammaM(_)
             | Command::SetTolerance(_)
             | Command::SetMaxIterations(_) => {
-                let mut params = sim.params().clone();
-                let what = match cmd {
-                    Command::SetGammaK(g) => {
-                        params.gamma_k = g;
-                        format!("gamma_K = {g:e} {}", sim.model().units.of(Quantity::Stress))
-                    }
-                    Command::SetDeltaOverH(d) => {
-                        params.delta_over_h = d;
-                        format!("delta/h = {d:e}")
-                    }
-                    Command::SetGammaM(g) => {
-                        params.gamma_m = g;
-                        format!("gamma_M = {g:e} {}", sim.model().units.of(Quantity::Density))
-                    }
-                    Command::SetTolerance(t) => {
-                        params.tolerance = t;
-                        format!("tolerance = {t:e}")
-                    }
-                    Command::SetMaxIterations(n) => {
-                        params.max_iterations = n;
-                        format!("max_iterations = {n}")
-                    }
-                    _ => continue, // not a parameter (matched above)
+                let Some((params, what)) = changed_params(&sim, &cmd) else {
+                    continue; // not a parameter (matched above)
                 };
                 let text = format!("parameter: {what} from step {}", sim.step_index() + 1);
                 set_params(&mut sim, &mut recorder, &updates, params, &text);
             }
             Command::Checkpoint => {
-                let dir = std::path::Path::new("checkpoints");
-                let path = dir.join(format!("{}-step-{:06}.ckpt", sim.model().name, sim.step_index()));
-                let result = std::fs::create_dir_all(dir)
-                    .map_err(|e| format!("cannot create {}: {e}", dir.display()))
-                    .and_then(|_| sim.save_checkpoint(&path, &scene_text).map_err(|e| e.to_string()));
-                let text = match result {
-                    Ok(()) => format!(
-                        "checkpoint of step {} written to {} (continue from it: mpmlab tui SCENE --resume {})",
-                        sim.step_index(),
-                        path.display(),
-                        path.display()
-                    ),
-                    Err(e) => e,
-                };
+                let text = write_checkpoint(&sim, &scene_text);
                 tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
                 let _ = updates.send(Update::Message(text));
             }
             Command::ToggleVtk => {
-                let text = match vtk.take() {
-                    Some(v) => match v.finish(&sim) {
-                        Ok(summary) => format!("ParaView series closed: {summary}"),
-                        Err(e) => e.to_string(),
-                    },
-                    None => {
-                        let dir = std::path::PathBuf::from(format!(
-                            "vtk/{}-from-step-{}",
-                            sim.model().name,
-                            sim.step_index()
-                        ));
-                        match crate::vtk::VtkExport::create(&dir, &sim, 1) {
-                            Ok(v) => {
-                                vtk = Some(v);
-                                format!(
-                                    "ParaView series: every step from here into {} (V stops; open points.pvd)",
-                                    dir.display()
-                                )
-                            }
-                            Err(e) => e.to_string(),
-                        }
-                    }
-                };
+                let text = toggle_vtk(&sim, &mut vtk);
                 tell(&updates, runner::note(&mut [&mut recorder], &text, "INFO"));
                 let _ = updates.send(Update::Message(text));
             }

@@ -1,6 +1,6 @@
-//! Helpers shared by the front end's integration tests (included with
-//! `mod common;`): the engine's scene helpers, temporary paths, the binary
-//! and recordings.
+//! Helpers shared by the front end's integration tests (the `common`
+//! module of `tests/frontend`): the engine's scene helpers, temporary
+//! paths, the binary and recordings.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};

@@ -1,8 +1,8 @@
 //! The command line as a user meets it: bad scenes are reported with file,
 //! line and field; every shipped scene runs.
 
-mod common;
-use common::{mpmlab, temp_path};
+use crate::common;
+use crate::common::{mpmlab, temp_path};
 use std::process::Command;
 
 /// The patch scene with `from` replaced by `to`, written to a temp file.

@@ -1,6 +1,6 @@
 """Read a folder written by `mpmlab run --vtk DIR` with readers that share
 no code with the writer, and print what it holds, one fact a line, for
-tests/vtk.rs to compare with the engine's state.
+tests/frontend/vtk.rs to compare with the engine's state.
 
 The points (.vtu) are read with meshio; the collections (.pvd), the
 boundaries (.vtp) and the grid (.vtr), which meshio does not read, with

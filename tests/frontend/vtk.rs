@@ -1,14 +1,14 @@
 //! `mpmlab run --vtk DIR`: the ParaView series read back by readers that
 //! share no code with the writer (meshio for the points, Python's XML
-//! parser for the collections, boundaries and grid: `tests/vtk_read.py`)
+//! parser for the collections, boundaries and grid: `tests/frontend/vtk_read.py`)
 //! and by vtkio's own reader, and compared with the engine's state at
 //! every step, run in this process from the same scene text.
 //!
 //! Without python3 and meshio these tests fail when `CI` is set (`.ci/run`
 //! installs meshio) and are skipped with a message otherwise.
 
-mod common;
-use common::mpmlab;
+use crate::common;
+use crate::common::mpmlab;
 use mpmlab::field::Field;
 use mpmlab::scene::Scene;
 use mpmlab::{Model, Simulation};
@@ -61,7 +61,7 @@ fn simulation(text: &str) -> Simulation {
 /// A polyline read back: its cell data (`name=value,...`) and its points.
 type Line = (String, Vec<[f64; 2]>);
 
-/// What `tests/vtk_read.py` found in a folder.
+/// What `tests/frontend/vtk_read.py` found in a folder.
 #[derive(Default, Debug)]
 struct Read {
     /// kind -> [(step, timestep)] in collection order.
@@ -79,7 +79,7 @@ struct Read {
 /// Read `dir` with the independent readers; `None` (skip) when python3 or
 /// meshio is missing outside CI.
 fn read(dir: &Path) -> Option<Read> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/vtk_read.py");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/frontend/vtk_read.py");
     let out = Command::new("python3").arg(&script).arg(dir).output();
     let missing = match &out {
         Err(e) => Some(format!("python3 cannot be started: {e}")),
@@ -307,7 +307,7 @@ fn explicit_dynamics_series_is_on_simulated_time_at_a_cadence() {
 #[test]
 fn a_failed_run_ends_its_series_on_the_last_good_state() {
     // The plain GIMP beam (h = 0.25, 2x2 points) fails at step 13 (see
-    // `a_failed_run_leaves_a_readable_recording` in tests/cli.rs): written
+    // `a_failed_run_leaves_a_readable_recording` in tests/frontend/cli.rs): written
     // every 5 steps, the series holds 0, 5, 10 and the last good step 12,
     // and no value of the failed step.
     let dir = temp_dir("failed");

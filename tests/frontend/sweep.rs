@@ -1,8 +1,8 @@
 //! `mpmlab sweep` end to end: the CSV, observed rates, restart, failed runs
 //! as rows, emitted jobs collected, and the SVG charts read back.
 
-mod common;
-use common::{mpmlab, temp_path};
+use crate::common;
+use crate::common::{mpmlab, temp_path};
 use mpmlab::sweep::{from_csv, rates, RunResult};
 use std::path::Path;
 use std::process::Command;
@@ -149,7 +149,7 @@ fn a_failed_run_is_a_row_with_its_reason() {
     assert_eq!(count(&svg, r#"data-completed="false""#), 1);
     // A setting the scene rejects is a row too, not a crash of the sweep
     // (warned about before the runs; a sweep of nothing but such runs is
-    // refused, tests/hostile.rs).
+    // refused, tests/frontend/hostile.rs).
     let (code, _, err) = mpmlab(&[
         "sweep",
         "scenarios/patch-compression.toml",

@@ -6,8 +6,7 @@
 //! located error. Also: `--record` does not overwrite what is not a
 //! recording, and sweeps reject bad settings before anything runs.
 
-mod common;
-use common::{mpmlab, scene_path, temp_path};
+use crate::common::{mpmlab, scene_path, temp_path};
 use mpmlab::model::Limits;
 use mpmlab::scene::Scene;
 use mpmlab::Model;

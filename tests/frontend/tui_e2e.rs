@@ -1,7 +1,7 @@
 //! The real binary in a pseudo-terminal (util-linux `script` provides it):
 //! keys go in, the screen text and the recording come out.
 
-mod common;
+use crate::common;
 use std::io::Write;
 use std::process::{Command, Stdio};
 use std::time::Duration;

@@ -2,8 +2,8 @@
 //! probes, the step table as CSV, and checkpoints that resume a run to the
 //! same end.
 
-mod common;
-use common::{mpmlab, run_all, scene_path, sim_with, temp_path};
+use crate::common;
+use crate::common::{mpmlab, run_all, scene_path, sim_with, temp_path};
 
 fn scene(name: &str) -> String {
     scene_path(name).display().to_string()

@@ -1,8 +1,8 @@
 //! A recording read back with rerun's own decoder: entity paths, number of
 //! points and metric values match what the run reported.
 
-mod common;
-use common::{read_chunks, sim_with, temp_path};
+use crate::common;
+use crate::common::{read_chunks, sim_with, temp_path};
 use mpmlab::record::Recorder;
 use std::collections::BTreeMap;
 

@@ -1,8 +1,7 @@
 //! The TUI's first screen and a screen after a step, rendered with
 //! ratatui's TestBackend.
 
-mod common;
-use common::sim_with;
+use crate::common::sim_with;
 use mpmlab::tui::app::{Action, App, Command, Update, View};
 use mpmlab::tui::draw::draw;
 use ratatui::backend::TestBackend;

@@ -1,0 +1,35 @@
+//! `mpmlab replay`: a recording in the rerun viewer.
+
+use anyhow::{Context, Result};
+use std::path::Path;
+use std::process::ExitCode;
+
+/// `mpmlab replay FILE`: the rerun viewer on a recording, if installed;
+/// otherwise the exact command that installs the matching viewer (exit 1).
+pub fn replay(file: &Path) -> Result<ExitCode> {
+    use mpmlab::record::RERUN_VERSION;
+    if !file.is_file() {
+        anyhow::bail!("{}: no such recording", file.display());
+    }
+    let viewer = std::env::var_os("PATH").and_then(|paths| {
+        std::env::split_paths(&paths)
+            .map(|d| d.join("rerun"))
+            .find(|p| p.is_file())
+    });
+    let Some(viewer) = viewer else {
+        out!(
+            "the rerun viewer is not installed; install the version that reads these recordings and open it with:\n  pip install rerun-sdk=={RERUN_VERSION}\n  rerun {}",
+            file.display()
+        );
+        return Ok(ExitCode::from(1));
+    };
+    let status = std::process::Command::new(&viewer)
+        .arg(file)
+        .status()
+        .with_context(|| format!("cannot start {}", viewer.display()))?;
+    Ok(if status.success() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}

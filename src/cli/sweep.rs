@@ -1,0 +1,183 @@
+//! `mpmlab sweep` (plan, run or emit, collect) and `mpmlab sweep-run`
+//! (one run of a sweep).
+
+use super::args::SweepArgs;
+use super::common::load;
+use super::target::target_search;
+use super::validate::validate_runs;
+use anyhow::{Context, Result};
+use mpmlab::model::Limits;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// `mpmlab sweep --collect DIR`: merge the results, warn about runs
+/// without a result and failed runs; exit 1 when nothing was collected.
+fn collect(dir: &Path) -> Result<ExitCode> {
+    use mpmlab::sweep::{driver, Folder};
+    let folder = Folder(dir.to_path_buf());
+    let order: Vec<String> = std::fs::read_to_string(dir.join("runs.txt"))
+        .map(|t| t.lines().filter(|l| !l.is_empty()).map(str::to_string).collect())
+        .unwrap_or_default();
+    if !dir.is_dir() || (order.is_empty() && !folder.results().is_dir() && !folder.csv().is_file()) {
+        eprintln!(
+            "error: {} is not a sweep folder (no runs.txt, results/ or sweep.csv)",
+            dir.display()
+        );
+        return Ok(ExitCode::from(2));
+    }
+    let found = folder.collect();
+    let missing: Vec<&String> = order.iter().filter(|id| !found.contains_key(*id)).collect();
+    let listed = |ids: &[&String]| {
+        let mut s = ids.iter().take(10).map(|s| s.as_str()).collect::<Vec<_>>().join(", ");
+        if ids.len() > 10 {
+            s.push_str(&format!(", ... ({} more)", ids.len() - 10));
+        }
+        s
+    };
+    if !missing.is_empty() {
+        eprintln!(
+            "warning: {} of {} runs have no result (not run yet, or their process died): {}",
+            missing.len(),
+            order.len(),
+            listed(&missing)
+        );
+    }
+    let collected: Vec<_> = if order.is_empty() {
+        found.values().collect()
+    } else {
+        order.iter().filter_map(|id| found.get(id)).collect()
+    };
+    let failed: Vec<&String> = collected.iter().filter(|r| !r.completed).map(|r| &r.id).collect();
+    if !failed.is_empty() {
+        eprintln!(
+            "warning: {} of {} collected runs did not complete: {}",
+            failed.len(),
+            collected.len(),
+            listed(&failed)
+        );
+    }
+    if collected.is_empty() {
+        eprintln!("error: nothing to collect in {}: no run has a result", dir.display());
+        return Ok(ExitCode::from(1));
+    }
+    let title = dir
+        .file_name()
+        .map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
+    out!("{}", driver::finish(&folder, &title).map_err(anyhow::Error::msg)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `mpmlab sweep`: plan, run (or emit) and summarise. Exit 2 for bad
+/// arguments or scenes, including any run whose settings make an invalid
+/// scene (checked before anything runs); failed runs are rows of the
+/// table, not errors.
+pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
+    use mpmlab::sweep::{driver, expand, presets, Folder, Vary};
+    if let Some(dir) = a.collect {
+        return collect(&dir);
+    }
+    let (name, path, fixed, mut varies) = match (&a.preset, &a.scene) {
+        (Some(p), _) => {
+            let pr = presets::preset(p)
+                .with_context(|| format!("no preset `{p}`; presets: {}", presets::NAMES.join(", ")))?;
+            out!("preset `{}`: {}", pr.name, pr.about);
+            let path = PathBuf::from("scenarios").join(format!("{}.toml", pr.scene));
+            (pr.name.to_string(), path, pr.fixed, pr.vary)
+        }
+        (None, Some(s)) => (
+            s.file_stem()
+                .map_or("sweep".into(), |n| n.to_string_lossy().into_owned()),
+            s.clone(),
+            Vec::new(),
+            Vec::new(),
+        ),
+        (None, None) => anyhow::bail!("give a scene file, --preset NAME or --collect DIR"),
+    };
+    if let Some(t) = &a.target {
+        let mut tries = Vec::new();
+        for t in &a.tries {
+            match Vary::parse(t) {
+                Ok(v) => tries.push(v),
+                Err(e) => {
+                    eprintln!("error: --try {e}");
+                    return Ok(ExitCode::from(2));
+                }
+            }
+        }
+        return target_search(&name, &path, a.out.clone(), t, a.budget, tries);
+    }
+    for v in &a.vary {
+        varies.push(Vary::parse(v).map_err(anyhow::Error::msg)?);
+    }
+    if varies.is_empty() {
+        anyhow::bail!("nothing to vary: give --vary KEY=V1,V2,...");
+    }
+    if a.estimate {
+        let sizes = |v: &Vary| {
+            let mut x: Vec<String> = v.values.clone();
+            x.sort();
+            x.dedup();
+            x.len()
+        };
+        if !varies
+            .iter()
+            .any(|v| (v.key == "h" || v.key == "grid.h") && sizes(v) >= 3)
+        {
+            eprintln!("error: --estimate needs a refinement study: --vary h=V1,V2,V3 (three or more cell sizes)");
+            return Ok(ExitCode::from(2));
+        }
+    }
+    // The base scene must be valid before anything is written.
+    let base = match mpmlab::scene::read_scene_text(&path) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(ExitCode::from(2));
+        }
+    };
+    if let Err(code) = load(&path, &Limits::default()) {
+        return Ok(code);
+    }
+    if let Err(e) = validate_runs(&base, &fixed, &expand(&varies)) {
+        eprintln!("error: --vary: {e}");
+        return Ok(ExitCode::from(2));
+    }
+    let folder = Folder(a.out.unwrap_or_else(|| PathBuf::from("sweeps").join(&name)));
+    let runs = driver::prepare(&folder, &base, &fixed, &varies).map_err(anyhow::Error::msg)?;
+    let todo = driver::pending(&folder, &runs);
+    let exe = std::env::current_exe().context("cannot find the mpmlab executable")?;
+    out!(
+        "sweep `{name}` in {}: {} runs, {} already done",
+        folder.0.display(),
+        runs.len(),
+        runs.len() - todo.len()
+    );
+    if a.emit_jobs {
+        let p = driver::emit_jobs(&folder, &exe, &todo, a.record).map_err(anyhow::Error::msg)?;
+        let p = std::path::absolute(&p).unwrap_or(p);
+        out!(
+            "wrote {} commands to {} (absolute paths: run them from any directory, e.g. `parallel < {}`), then `mpmlab sweep --collect {}`",
+            todo.len(),
+            p.display(),
+            p.display(),
+            folder.0.display()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
+    driver::execute(&folder, &exe, &todo, usize::from(a.jobs), a.record, &|line| {
+        out!("{line}")
+    });
+    out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `mpmlab sweep-run`: one run, its result row to `result`.
+pub fn sweep_run(scene: &Path, result: &Path, record: Option<&Path>) -> Result<ExitCode> {
+    let r = mpmlab::sweep::run_file_recorded(scene, record);
+    if let Some(dir) = result.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    std::fs::write(result, mpmlab::sweep::to_csv(std::slice::from_ref(&r)))
+        .with_context(|| format!("cannot write {}", result.display()))?;
+    Ok(ExitCode::SUCCESS)
+}
