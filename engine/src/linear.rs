@@ -16,8 +16,8 @@
 
 use crate::assembly::{Dof, Mapping};
 use crate::geometry::P2;
-use crate::ibm::{self, IbmReport, IbmStep};
-use crate::implicit::{contributions, finish, norm, Assembly, At, Done, Frame, Response};
+use crate::ibm::{self, IbmReport};
+use crate::implicit::{band, contributions, finish, norm, Assembly, At, Done, Frame, Response};
 use crate::linalg::{self, Condition, Eigen, SparseRef};
 use crate::material::mul3;
 use crate::points::Points;
@@ -330,44 +330,18 @@ struct Updated {
 /// work of loads, supports and implicit boundaries; the stored energy.
 fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Result<Updated, StepFailure> {
     let frame = &setup.frame;
-    let (sim, map, pts) = (frame.sim, &frame.map, &frame.sim.state.points);
+    let (sim, map) = (frame.sim, &frame.map);
     let (step, lambda0, lambda1) = (frame.step, frame.lambda0, frame.lambda1);
     let forces = &system.forces;
-    let d_of = |p: usize| sim.material_of(p).d_matrix();
     let nodal_d = nodal_increments(map, du);
     // Points move with N (d + d^a); those inside a band with D N d + N d^a.
     let nodal = frame.motion(&nodal_d);
     let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal, step)?;
-    let mut ibm_reports = Vec::new();
-    let mut ibm_work = 0.0;
-    if let Some(s) = &frame.ibm {
-        for p in (0..points.len()).filter(|&p| s.in_band[p]) {
-            let st = map.stencils.get(p);
-            let (bb, plain) = s.point_b(st, pts.x[p]);
-            let (dm, _) = ibm::d_total(s.bs, pts.x[p], s.delta);
-            let mut de = [0.0; 3];
-            let mut dx = [0.0; 2];
-            for (k, (n, w, _)) in st.iter().enumerate() {
-                for c in 0..2 {
-                    for r in 0..3 {
-                        de[r] += (bb[k][r][c] - plain[k][r][c]) * nodal_d[n][c];
-                    }
-                    for i in 0..2 {
-                        dx[i] += ((dm[i][c]) - if i == c { 1.0 } else { 0.0 }) * w * nodal_d[n][c];
-                    }
-                }
-            }
-            let ds = mul3(&d_of(p), de);
-            for r in 0..3 {
-                points.stress[p][r] += ds[r];
-                points.strain[p][r] += de[r];
-            }
-            points.x[p] = [points.x[p][0] + dx[0], points.x[p][1] + dx[1]];
-        }
-        let (reports, work) = point_ibm_reports(sim, map, s, &points, &nodal_d, &forces.ext, lambda0, lambda1);
-        ibm_reports = reports;
-        ibm_work = work;
-    }
+    // In a band, points move with D N d + N d^a and strain with B_bar.
+    let (ibm_reports, ibm_work) = match &frame.ibm {
+        Some(s) => band::small_strain_update(frame, s, &mut points, &nodal_d, &forces.ext),
+        None => (Vec::new(), 0.0),
+    };
     check_points(&sim.model.grid, &points, step, residuals)?;
     // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
     let mut work = 0.0;
@@ -408,58 +382,6 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
         work,
         ibm: ibm_reports,
     })
-}
-
-/// Reports of the implicit boundaries after an update (reaction from
-/// the out-of-balance of the new stresses on the nodes of each
-/// boundary's cut cells; violation sampled along the boundary), and the
-/// work their reactions did in the step (trapezoidal).
-#[allow(clippy::too_many_arguments)]
-fn point_ibm_reports(
-    sim: &Simulation,
-    map: &Mapping,
-    s: &IbmStep,
-    new: &Points,
-    nodal_d: &[P2],
-    ext: &[f64],
-    lambda0: f64,
-    lambda1: f64,
-) -> (Vec<IbmReport>, f64) {
-    let grid = &sim.model.grid;
-    let old = &sim.state.points;
-    // Out-of-balance of the material (internal minus every external
-    // force on the free dofs) at the start and end of the step: where
-    // the implicit boundaries act, it is their reaction.
-    let mut residual = vec![[0.0; 2]; grid.num_nodes()];
-    let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
-    for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
-        let st = map.stencils.get(p);
-        let (bb, _) = s.point_b(st, old.x[p]);
-        for (k, (n, _, _)) in st.iter().enumerate() {
-            for c in 0..2 {
-                let f = |sig: [f64; 3]| (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
-                residual[n][c] += f(new.stress[p]);
-                residual0[n][c] += f(old.stress[p]);
-            }
-        }
-    }
-    for (n, d) in map.dofs.node_dof.iter().enumerate() {
-        for c in 0..2 {
-            if let Dof::Free(i) = d[c] {
-                residual[n][c] -= lambda1 * ext[i];
-                residual0[n][c] -= lambda0 * ext[i];
-            }
-        }
-    }
-    s.reports(
-        grid,
-        &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
-        &residual0,
-        &residual,
-        nodal_d,
-        sim.model.exact.as_ref(),
-        lambda1 - lambda0,
-    )
 }
 
 /// The fields a small-strain step writes after applying nodal increments

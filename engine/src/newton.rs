@@ -38,10 +38,10 @@
 
 use crate::assembly::Dof;
 use crate::boundary::BoundaryReport;
-use crate::bulk::{band_gradient, evaluate_with};
+use crate::bulk::band_gradient;
 use crate::geometry::P2;
 use crate::ibm::IbmBoundary;
-use crate::implicit::{contributions, finish, norm, Assembly, Done, Frame, Residual, Response};
+use crate::implicit::{band, contributions, finish, norm, Assembly, Done, Frame, Residual, Response};
 use crate::kinematics::{commit_point, increment_gradient};
 use crate::linalg::{self, Condition, SparseRef};
 use crate::report::{Cutback, SolverReport, StepFailure, StepReport, Timings};
@@ -547,41 +547,15 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
             }
         }
     }
-    let mut ibm = Vec::new();
-    if let Some(s) = &frame.ibm {
-        // Out-of-balance of the points at the start (zero increment) and
-        // the end of the step: the implicit boundaries' reactions.
-        let zero = vec![[0.0; 2]; d.len()];
-        let it0 = evaluate_with(sim, map, &zero, Some((&frame.ops, &zero, &zero))).map_err(|e| e.at_step(step))?;
-        // At grid-held dofs the internal force: a node shared with a grid
-        // support splits it with that support (`IbmStep::reports`).
-        let per_node = |fint: &[f64], fixed: &[f64], ext: &dyn Fn(usize) -> f64| {
-            let mut out = vec![[0.0; 2]; d.len()];
-            for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
-                for c in 0..2 {
-                    match dofs[c] {
-                        Dof::Free(i) => out[n][c] = fint[i] - ext(i),
-                        Dof::Fixed(i) => out[n][c] = fixed[i],
-                        Dof::Inactive => {}
-                    }
-                }
-            }
-            out
-        };
-        let r0 = per_node(&it0.fint_free, &it0.fint_fixed, &|i| lambda0 * forces.ext[i]);
-        let r1 = per_node(&it.fint_free, &it.fint_fixed, &|i| res.fext[i]);
-        let (reports, w) = s.reports(
-            &sim.model.grid,
-            &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
-            &r0,
-            &r1,
-            d,
-            sim.model.exact.as_ref(),
-            lambda1 - lambda0,
-        );
-        ibm = reports;
-        work += w;
-    }
+    // The implicit boundaries' reactions and their work.
+    let ibm = match &frame.ibm {
+        Some(s) => {
+            let (reports, w) = band::finite_reports(frame, s, it, &res.fext, &forces.ext, d)?;
+            work += w;
+            reports
+        }
+        None => Vec::new(),
+    };
     Ok(Updated {
         points: pts,
         strain_energy,

@@ -6,8 +6,12 @@
 
 use super::contribution::{At, Contribution};
 use super::frame::Frame;
+use crate::assembly::Dof;
+use crate::bulk::{evaluate_with, Iterate};
 use crate::geometry::P2;
-use crate::ibm::{BandBlock, BandMaterial};
+use crate::ibm::{self, BandBlock, BandMaterial, IbmReport, IbmStep};
+use crate::material::mul3;
+use crate::points::Points;
 use crate::report::StepFailure;
 
 /// The band's blocks (`K_band`, symmetric) and `f_d` per grid node.
@@ -85,4 +89,148 @@ impl Contribution for Band {
         out.extend_from_slice(&self.blocks[k].1);
         Ok(())
     }
+}
+
+/// A small-strain step's update of the points inside a band (C (18),
+/// (27)): their strain by `B_bar` (`de += (B_bar - B) d`, `s += D de`) and
+/// their motion by `D N d + N d^a` (`x += (D - I) N d` on top of the plain
+/// update in `points`); then each implicit boundary's report and the work
+/// its reaction did ([`small_strain_reports`]). `nodal_d` is the solved
+/// increment per grid node, `ext` the loads per unit load factor on the
+/// free dofs.
+pub(crate) fn small_strain_update(
+    frame: &Frame,
+    s: &IbmStep,
+    points: &mut Points,
+    nodal_d: &[P2],
+    ext: &[f64],
+) -> (Vec<IbmReport>, f64) {
+    let (sim, map) = (frame.sim, &frame.map);
+    let pts = &sim.state.points;
+    let d_of = |p: usize| sim.material_of(p).d_matrix();
+    for p in (0..points.len()).filter(|&p| s.in_band[p]) {
+        let st = map.stencils.get(p);
+        let (bb, plain) = s.point_b(st, pts.x[p]);
+        let (dm, _) = ibm::d_total(s.bs, pts.x[p], s.delta);
+        let mut de = [0.0; 3];
+        let mut dx = [0.0; 2];
+        for (k, (n, w, _)) in st.iter().enumerate() {
+            for c in 0..2 {
+                for r in 0..3 {
+                    de[r] += (bb[k][r][c] - plain[k][r][c]) * nodal_d[n][c];
+                }
+                for i in 0..2 {
+                    dx[i] += ((dm[i][c]) - if i == c { 1.0 } else { 0.0 }) * w * nodal_d[n][c];
+                }
+            }
+        }
+        let ds = mul3(&d_of(p), de);
+        for r in 0..3 {
+            points.stress[p][r] += ds[r];
+            points.strain[p][r] += de[r];
+        }
+        points.x[p] = [points.x[p][0] + dx[0], points.x[p][1] + dx[1]];
+    }
+    small_strain_reports(frame, s, points, nodal_d, ext)
+}
+
+/// Reports of the implicit boundaries after an update (reaction from
+/// the out-of-balance of the new stresses on the nodes of each
+/// boundary's cut cells; violation sampled along the boundary), and the
+/// work their reactions did in the step (trapezoidal).
+fn small_strain_reports(
+    frame: &Frame,
+    s: &IbmStep,
+    new: &Points,
+    nodal_d: &[P2],
+    ext: &[f64],
+) -> (Vec<IbmReport>, f64) {
+    let (sim, map) = (frame.sim, &frame.map);
+    let (lambda0, lambda1) = (frame.lambda0, frame.lambda1);
+    let grid = &sim.model.grid;
+    let old = &sim.state.points;
+    // Out-of-balance of the material (internal minus every external
+    // force on the free dofs) at the start and end of the step: where
+    // the implicit boundaries act, it is their reaction.
+    let mut residual = vec![[0.0; 2]; grid.num_nodes()];
+    let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
+    for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
+        let st = map.stencils.get(p);
+        let (bb, _) = s.point_b(st, old.x[p]);
+        for (k, (n, _, _)) in st.iter().enumerate() {
+            for c in 0..2 {
+                let f = |sig: [f64; 3]| (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];
+                residual[n][c] += f(new.stress[p]);
+                residual0[n][c] += f(old.stress[p]);
+            }
+        }
+    }
+    for (n, d) in map.dofs.node_dof.iter().enumerate() {
+        for c in 0..2 {
+            if let Dof::Free(i) = d[c] {
+                residual[n][c] -= lambda1 * ext[i];
+                residual0[n][c] -= lambda0 * ext[i];
+            }
+        }
+    }
+    s.reports(
+        grid,
+        &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
+        &residual0,
+        &residual,
+        nodal_d,
+        sim.model.exact.as_ref(),
+        lambda1 - lambda0,
+    )
+}
+
+/// A finite-deformation step's implicit-boundary reports and the work of
+/// their reactions: the out-of-balance of the points at the start (zero
+/// increment) and the end (response `it`, external force `fext`) of the
+/// step on the nodes of each boundary's cut cells ([`IbmStep::reports`]).
+/// `start_ext` is the external force per unit load factor at the start of
+/// the step, `d` the converged unknowns.
+pub(crate) fn finite_reports(
+    frame: &Frame,
+    s: &IbmStep,
+    it: &Iterate,
+    fext: &[f64],
+    start_ext: &[f64],
+    d: &[P2],
+) -> Result<(Vec<IbmReport>, f64), StepFailure> {
+    let (sim, map, step) = (frame.sim, &frame.map, frame.step);
+    let (lambda0, lambda1) = (frame.lambda0, frame.lambda1);
+    let forces_ext = start_ext;
+    // Out-of-balance of the points at the start (zero increment) and
+    // the end of the step: the implicit boundaries' reactions.
+    let zero = vec![[0.0; 2]; d.len()];
+    let it0 =
+        evaluate_with(sim, map, &zero, Some((&frame.ops[..], &zero[..], &zero[..]))).map_err(|e| e.at_step(step))?;
+    // At grid-held dofs the internal force: a node shared with a grid
+    // support splits it with that support (`IbmStep::reports`).
+    let per_node = |fint: &[f64], fixed: &[f64], ext: &dyn Fn(usize) -> f64| {
+        let mut out = vec![[0.0; 2]; d.len()];
+        for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
+            for c in 0..2 {
+                match dofs[c] {
+                    Dof::Free(i) => out[n][c] = fint[i] - ext(i),
+                    Dof::Fixed(i) => out[n][c] = fixed[i],
+                    Dof::Inactive => {}
+                }
+            }
+        }
+        out
+    };
+    let r0 = per_node(&it0.fint_free, &it0.fint_fixed, &|i| lambda0 * forces_ext[i]);
+    let r1 = per_node(&it.fint_free, &it.fint_fixed, &|i| fext[i]);
+    let (reports, w) = s.reports(
+        &sim.model.grid,
+        &|n, c| matches!(map.dofs.node_dof[n][c], Dof::Free(_)),
+        &r0,
+        &r1,
+        d,
+        sim.model.exact.as_ref(),
+        lambda1 - lambda0,
+    );
+    Ok((reports, w))
 }

@@ -13,7 +13,7 @@
 //! response (its points' stiffness `B^T D B`); the Newton step iterates
 //! on the residual with the points' finite-deformation response.
 
-mod band;
+pub(crate) mod band;
 mod contribution;
 mod frame;
 mod ghost;
