@@ -2,7 +2,59 @@
 
 use super::*;
 
-pub(super) fn build_exact(
+/// The scene's `[exact]` solution, if any: free motion from the bodies'
+/// velocity fields, any other from [`build_exact`].
+pub(super) fn build_exact_solution(
+    scene: &Scene,
+    materials: &[Material],
+    bodies: &[Body],
+    gravity: P2,
+) -> Result<Option<ExactSolution>, FieldError> {
+    match &scene.exact {
+        None => Ok(None),
+        Some(ExactSpec::FreeMotion {}) => free_motion(scene, materials, bodies).map(Some),
+        Some(spec) => Ok(Some(build_exact(spec, materials, bodies, gravity)?)),
+    }
+}
+
+/// The free-motion solution: each body moving with its initial velocity
+/// field over the explicit run's duration, exact only for stress-free
+/// bodies when the field has a gradient.
+fn free_motion(scene: &Scene, materials: &[Material], bodies: &[Body]) -> Result<ExactSolution, FieldError> {
+    let duration = match (scene.analysis.kind, scene.analysis.duration) {
+        (crate::scene::AnalysisKind::ExplicitDynamics, Some(d)) => d,
+        _ => {
+            return Err(FieldError::new(
+                "exact.name",
+                "free-motion needs kind = \"explicit-dynamics\" with a duration",
+            ))
+        }
+    };
+    let strained = bodies
+        .iter()
+        .zip(&scene.bodies)
+        .any(|(b, spec)| materials[b.material].elastic.e != 0.0 && spec.velocity_gradient.is_some());
+    if strained {
+        return Err(FieldError::new(
+            "exact.name",
+            "free motion with a velocity gradient is exact only for stress-free (E = 0) bodies",
+        ));
+    }
+    let fields = scene
+        .bodies
+        .iter()
+        .map(|b| {
+            (
+                b.velocity,
+                b.velocity_gradient.unwrap_or([[0.0; 2]; 2]),
+                b.velocity_centre,
+            )
+        })
+        .collect();
+    Ok(ExactSolution::FreeMotion { fields, duration })
+}
+
+fn build_exact(
     spec: &ExactSpec,
     materials: &[Material],
     bodies: &[Body],

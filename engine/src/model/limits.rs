@@ -156,6 +156,32 @@ pub(super) fn check_names(scene: &Scene) -> Result<(), FieldError> {
     Ok(())
 }
 
+/// Tracking points of all boundaries, and vertices of all implicit
+/// boundaries, together: each at most [`MAX_CURVE_POINTS`].
+pub(super) fn check_curve_totals(scene: &Scene) -> Result<(), FieldError> {
+    let mut total = 0usize;
+    for (k, b) in scene.boundaries.iter().enumerate() {
+        total = total.saturating_add(b.points.as_ref().map_or(0, Vec::len));
+        if total > MAX_CURVE_POINTS {
+            return Err(FieldError::new(
+                format!("boundary[{k}].points"),
+                format!("the boundaries have more than the {MAX_CURVE_POINTS} tracking points supported in all"),
+            ));
+        }
+    }
+    let mut total = 0usize;
+    for (k, b) in scene.ibm.iter().enumerate() {
+        total = total.saturating_add(b.points.len());
+        if total > MAX_CURVE_POINTS {
+            return Err(FieldError::new(
+                format!("ibm[{k}].points"),
+                format!("the implicit boundaries have more than the {MAX_CURVE_POINTS} points supported in all"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The memory estimate of a model, grown body by body before each body's
 /// points are generated, and the work of generating them.
 pub(super) struct Budget {

@@ -1,6 +1,7 @@
 //! The model: a validated scene turned into grid, materials, bodies with
 //! their material points, boundary conditions, loads and analysis settings.
 
+mod analysis;
 mod bodies;
 mod boundaries;
 mod conditions;
@@ -11,10 +12,11 @@ mod materials;
 mod probes;
 pub mod record;
 
+use analysis::{resolve_delta, validate_kind, validate_solver};
 use boundaries::build_boundary;
-use exact::build_exact;
+use exact::build_exact_solution;
 pub use limits::{available_memory, bytes, parse_bytes, Limits};
-use limits::{check_names, short, Budget};
+use limits::{check_curve_totals, check_names, short, Budget};
 
 use crate::basis::BasisKind;
 use crate::boundary::bspline::BSpline;
@@ -183,6 +185,8 @@ impl Model {
         Self::build(&scene, text, file)
     }
 
+    /// Validate and build, section by section in the order the errors are
+    /// reported; errors name a field, not yet a line.
     fn build_unlocated(scene: &Scene, limits: &Limits) -> Result<Model, FieldError> {
         check_names(scene)?;
         let grid = build_grid(scene)?;
@@ -193,101 +197,10 @@ impl Model {
         let dirichlet = conditions::dirichlet(scene, &grid)?;
         let (gravity, point_loads) = conditions::loads(scene, &grid, &points)?;
 
-        let a = &scene.analysis;
-        if !(1..=1_000_000).contains(&a.load_steps) {
-            return Err(FieldError::new("analysis.load_steps", "must be between 1 and 1000000"));
-        }
-        if !(a.tolerance > 0.0 && a.tolerance < 1.0) {
-            return Err(FieldError::new("analysis.tolerance", "must lie in (0, 1)"));
-        }
-        if !(1..=1000).contains(&a.max_iterations) {
-            return Err(FieldError::new("analysis.max_iterations", "must be between 1 and 1000"));
-        }
-        if a.max_cutbacks > 20 {
-            return Err(FieldError::new(
-                "analysis.max_cutbacks",
-                "must be at most 20 (an increment of 2^-20 of a load step)",
-            ));
-        }
-        if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
-            return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
-        }
-        if a.fbar && a.kind != crate::scene::AnalysisKind::QuasiStaticFinite {
-            return Err(FieldError::new(
-                "analysis.fbar",
-                "F-bar modifies the finite-deformation (Newton) path only: kind = \"quasi-static-finite\"",
-            ));
-        }
-        if a.dense_limit > MAX_DENSE_LIMIT {
-            return Err(FieldError::new(
-                "analysis.dense_limit",
-                format!("must be at most {MAX_DENSE_LIMIT}, got {}", a.dense_limit),
-            ));
-        }
-        if !a.blowup_factor.is_finite() {
-            return Err(FieldError::new("analysis.blowup_factor", "must be finite"));
-        }
+        validate_solver(&scene.analysis)?;
+        let exact = build_exact_solution(scene, &materials, &bodies, gravity)?;
 
-        let exact = match &scene.exact {
-            None => None,
-            Some(ExactSpec::FreeMotion {}) => {
-                let duration = match (scene.analysis.kind, scene.analysis.duration) {
-                    (crate::scene::AnalysisKind::ExplicitDynamics, Some(d)) => d,
-                    _ => {
-                        return Err(FieldError::new(
-                            "exact.name",
-                            "free-motion needs kind = \"explicit-dynamics\" with a duration",
-                        ))
-                    }
-                };
-                let strained = bodies
-                    .iter()
-                    .zip(&scene.bodies)
-                    .any(|(b, spec)| materials[b.material].elastic.e != 0.0 && spec.velocity_gradient.is_some());
-                if strained {
-                    return Err(FieldError::new(
-                        "exact.name",
-                        "free motion with a velocity gradient is exact only for stress-free (E = 0) bodies",
-                    ));
-                }
-                let fields = scene
-                    .bodies
-                    .iter()
-                    .map(|b| {
-                        (
-                            b.velocity,
-                            b.velocity_gradient.unwrap_or([[0.0; 2]; 2]),
-                            b.velocity_centre,
-                        )
-                    })
-                    .collect();
-                Some(ExactSolution::FreeMotion { fields, duration })
-            }
-            Some(spec) => Some(build_exact(spec, &materials, &bodies, gravity)?),
-        };
-
-        // Tracking points of all boundaries, and vertices of all implicit
-        // boundaries, together.
-        let mut total = 0usize;
-        for (k, b) in scene.boundaries.iter().enumerate() {
-            total = total.saturating_add(b.points.as_ref().map_or(0, Vec::len));
-            if total > MAX_CURVE_POINTS {
-                return Err(FieldError::new(
-                    format!("boundary[{k}].points"),
-                    format!("the boundaries have more than the {MAX_CURVE_POINTS} tracking points supported in all"),
-                ));
-            }
-        }
-        let mut total = 0usize;
-        for (k, b) in scene.ibm.iter().enumerate() {
-            total = total.saturating_add(b.points.len());
-            if total > MAX_CURVE_POINTS {
-                return Err(FieldError::new(
-                    format!("ibm[{k}].points"),
-                    format!("the implicit boundaries have more than the {MAX_CURVE_POINTS} points supported in all"),
-                ));
-            }
-        }
+        check_curve_totals(scene)?;
         let mut boundaries: Vec<Boundary> = Vec::new();
         for (k, spec) in scene.boundaries.iter().enumerate() {
             if boundaries.iter().any(|b| b.name == spec.name) {
@@ -300,39 +213,8 @@ impl Model {
             boundaries.push(b);
         }
 
-        if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
-            validate_explicit(a, &dirichlet)?;
-            // Explicit dynamics divides by mass: every material needs density.
-            if let Some(k) = materials.iter().position(|m| !(m.density() > 0.0)) {
-                return Err(FieldError::new(
-                    format!("material[{k}].density"),
-                    "explicit dynamics needs a positive density",
-                ));
-            }
-            // Static exact solutions grow with the load factor; explicit
-            // loads act in full from the start, so only free motion applies.
-            if matches!(scene.exact, Some(ref e) if !matches!(e, ExactSpec::FreeMotion {})) {
-                return Err(FieldError::new(
-                    "exact.name",
-                    "explicit dynamics supports the free-motion exact solution only",
-                ));
-            }
-        } else if a.duration.is_some() {
-            return Err(FieldError::new(
-                "analysis.duration",
-                "only for kind = \"explicit-dynamics\"",
-            ));
-        }
-        let mut a = a.clone();
-        if let Some(d) = a.delta {
-            if !(d > 0.0 && d <= grid.h) {
-                return Err(FieldError::new("analysis.delta", "must lie in (0, h]"));
-            }
-            a.delta_over_h = d / grid.h;
-        }
-        if !(a.delta_over_h > 0.0 && a.delta_over_h <= 1.0) {
-            return Err(FieldError::new("analysis.delta_over_h", "must lie in (0, 1]"));
-        }
+        validate_kind(scene, &dirichlet, &materials)?;
+        let a = resolve_delta(&scene.analysis, &grid)?;
         let ibm = ibm::build(scene, &grid, &a, &boundaries, &points, &regions, exact.as_ref())?;
         let record = record::build(&scene.record, a.kind)?;
         let probes = probes::build(scene, &points, &boundaries, &ibm)?;
@@ -357,35 +239,6 @@ impl Model {
             max_memory: limits.max_memory,
         })
     }
-}
-
-/// Settings an explicit-dynamics analysis needs.
-fn validate_explicit(a: &AnalysisSpec, dirichlet: &[GridDirichlet]) -> Result<(), FieldError> {
-    match a.duration {
-        Some(d) if d > 0.0 && d.is_finite() => {}
-        Some(_) => return Err(FieldError::new("analysis.duration", "must be positive")),
-        None => {
-            return Err(FieldError::new(
-                "analysis.duration",
-                "explicit dynamics needs the simulated time `duration` (s)",
-            ))
-        }
-    }
-    if let Some(g) = a.gamma_m {
-        if !(g >= 0.0 && g.is_finite()) {
-            return Err(FieldError::new("analysis.gamma_m", "must be zero (off) or positive"));
-        }
-    }
-    if !(a.blowup_factor > 1.0) {
-        return Err(FieldError::new("analysis.blowup_factor", "must exceed 1"));
-    }
-    if dirichlet.iter().any(|d| d.value.iter().flatten().any(|v| *v != 0.0)) {
-        return Err(FieldError::new(
-            "dirichlet",
-            "explicit dynamics supports fixed and roller supports only (zero values)",
-        ));
-    }
-    Ok(())
 }
 
 impl Model {

@@ -197,91 +197,14 @@ fn finite(field: &str, v: &[f64]) -> Result<(), FieldError> {
 impl RegionSpec {
     /// Build the region; `path` is this spec's field path for errors.
     pub fn build(&self, path: &str) -> Result<Region, FieldError> {
-        let f = |name: &str| format!("{path}.{name}");
         match self {
-            RegionSpec::Rectangle { min, max } => {
-                finite(&f("min"), min)?;
-                finite(&f("max"), max)?;
-                if !(max[0] > min[0] && max[1] > min[1]) {
-                    return Err(FieldError::new(f("max"), "must exceed `min` in both coordinates"));
-                }
-                Ok(Region::convex(vec![*min, [max[0], min[1]], *max, [min[0], max[1]]]))
-            }
-            RegionSpec::Polygon { vertices } => {
-                if vertices.len() < 3 {
-                    return Err(FieldError::new(f("vertices"), "a polygon needs at least 3 vertices"));
-                }
-                if vertices.len() > MAX_VERTICES {
-                    return Err(FieldError::new(
-                        f("vertices"),
-                        format!(
-                            "{} vertices are more than the {MAX_VERTICES} a polygon may have",
-                            vertices.len()
-                        ),
-                    ));
-                }
-                finite(&f("vertices"), &vertices.concat())?;
-                if geometry::self_intersects(vertices) {
-                    return Err(FieldError::new(f("vertices"), "the polygon crosses itself"));
-                }
-                let poly = geometry::ccw(geometry::drop_collinear(vertices));
-                // Dropping collinear vertices can turn a crossing through a
-                // shared vertex into a proper one.
-                if geometry::self_intersects(&poly) {
-                    return Err(FieldError::new(f("vertices"), "the polygon crosses itself"));
-                }
-                // A vertex on another edge first: a bowtie whose crossing is a
-                // vertex has zero area but is really a self-touching outline.
-                if let Some(i) = touches_itself(&poly).filter(|_| poly.len() > 3) {
-                    return Err(FieldError::new(
-                        f("vertices"),
-                        format!(
-                            "the polygon touches itself at ({}, {}): a vertex lies on another edge",
-                            number(poly[i][0]),
-                            number(poly[i][1])
-                        ),
-                    ));
-                }
-                if geometry::area_centroid(&poly).0 <= 0.0 {
-                    return Err(FieldError::new(f("vertices"), "the polygon has zero area"));
-                }
-                if geometry::is_convex(&poly) {
-                    return Ok(Region::convex(poly));
-                }
-                let tris = geometry::triangulate(&poly)
-                    .ok_or_else(|| FieldError::new(f("vertices"), "the polygon could not be triangulated"))?;
-                Ok(Region {
-                    pieces: tris
-                        .into_iter()
-                        .map(|t| geometry::Piece::new(1.0, t.to_vec()))
-                        .collect(),
-                })
-            }
+            RegionSpec::Rectangle { min, max } => rectangle(min, max, path),
+            RegionSpec::Polygon { vertices } => polygon(vertices, path),
             RegionSpec::Circle {
                 center,
                 radius,
                 tolerance,
-            } => {
-                finite(&f("center"), center)?;
-                if !(*radius > 0.0 && radius.is_finite()) {
-                    return Err(FieldError::new(f("radius"), "must be positive"));
-                }
-                let tol = tolerance.unwrap_or(radius * 1e-4);
-                let n = chord_count(
-                    *radius,
-                    tol,
-                    std::f64::consts::TAU,
-                    &f("tolerance"),
-                    tolerance.is_some(),
-                )?;
-                let poly = (0..n)
-                    .map(|k| {
-                        let t = std::f64::consts::TAU * k as f64 / n as f64;
-                        [center[0] + radius * t.cos(), center[1] + radius * t.sin()]
-                    })
-                    .collect();
-                Ok(Region::convex(poly))
-            }
+            } => circle(center, *radius, *tolerance, path),
             RegionSpec::AnnulusSector {
                 center,
                 r_inner,
@@ -289,153 +212,282 @@ impl RegionSpec {
                 start_deg,
                 end_deg,
                 tolerance,
-            } => {
-                finite(&f("center"), center)?;
-                if !(*r_inner >= 0.0) {
-                    return Err(FieldError::new(f("r_inner"), "must be non-negative"));
-                }
-                if !(r_outer > r_inner && r_outer.is_finite()) {
-                    return Err(FieldError::new(f("r_outer"), "must exceed `r_inner`"));
-                }
-                finite(&f("start_deg"), &[*start_deg])?;
-                finite(&f("end_deg"), &[*end_deg])?;
-                let sweep = (end_deg - start_deg).to_radians();
-                if !(sweep > 0.0 && sweep <= std::f64::consts::TAU + 1e-12) {
-                    return Err(FieldError::new(f("end_deg"), "must exceed `start_deg` by at most 360"));
-                }
-                let tol = tolerance.unwrap_or(r_outer * 1e-4);
-                let n = chord_count(*r_outer, tol, sweep, &f("tolerance"), tolerance.is_some())?.max(2);
-                let at = |r: f64, k: usize| {
-                    let t = start_deg.to_radians() + sweep * k as f64 / n as f64;
-                    [center[0] + r * t.cos(), center[1] + r * t.sin()]
-                };
-                // Each angular slice is a convex trapezoid (or a triangle at r_inner = 0).
-                let pieces = (0..n)
-                    .map(|k| {
-                        let mut q = vec![
-                            at(*r_inner, k),
-                            at(*r_outer, k),
-                            at(*r_outer, k + 1),
-                            at(*r_inner, k + 1),
-                        ];
-                        if *r_inner == 0.0 {
-                            q.remove(3);
-                        }
-                        geometry::Piece::new(1.0, geometry::ccw(q))
-                    })
-                    .collect();
-                Ok(Region { pieces })
-            }
+            } => annulus_sector(center, *r_inner, *r_outer, *start_deg, *end_deg, *tolerance, path),
             RegionSpec::Spline {
                 points,
                 closed,
                 close_via,
                 corners,
                 per_segment,
-            } => {
-                finite(&f("points"), &points.concat())?;
-                let per = per_segment.unwrap_or(64);
-                if !(1..=MAX_PER_SEGMENT).contains(&per) {
-                    return Err(FieldError::new(
-                        f("per_segment"),
-                        format!("must be between 1 and {MAX_PER_SEGMENT}, got {per}"),
-                    ));
-                }
-                let vertices = (points.len() as u128 + 1) * per as u128 + close_via.len() as u128;
-                if vertices > MAX_VERTICES as u128 {
-                    return Err(FieldError::new(
-                        if per_segment.is_some() { f("per_segment") } else { f("points") },
-                        format!(
-                            "{} points at {per} chords per segment make about {vertices} vertices, more than the {MAX_VERTICES} a polygon may have",
-                            points.len()
-                        ),
-                    ));
-                }
-                let mut marks = vec![false; points.len()];
-                for &c in corners {
-                    *marks
-                        .get_mut(c)
-                        .ok_or_else(|| FieldError::new(f("corners"), format!("no point {c}")))? = true;
-                }
-                let spline = BSpline::interpolate(points, *closed, &marks)
-                    .map_err(|e| FieldError::new(f("points"), e.to_string()))?;
-                let mut poly = spline.sample(per);
-                if *closed {
-                    poly.pop(); // the last sample repeats the first
-                } else {
-                    finite(&f("close_via"), &close_via.concat())?;
-                    poly.extend(close_via.iter().copied());
-                }
-                RegionSpec::Polygon { vertices: poly }.build(path)
-            }
-            RegionSpec::Union { parts } => {
-                if parts.is_empty() {
-                    return Err(FieldError::new(f("parts"), "a union needs at least one part"));
-                }
-                if parts.len() > MAX_PARTS {
-                    return Err(FieldError::new(
-                        f("parts"),
-                        format!("{} parts are more than the {MAX_PARTS} a union may have", parts.len()),
-                    ));
-                }
-                let mut r = parts[0].build(&format!("{path}.parts[0]"))?;
-                for (k, p) in parts.iter().enumerate().skip(1) {
-                    let field = format!("{path}.parts[{k}]");
-                    let q = p.build(&field)?;
-                    check_pieces(&r, &q, &field)?;
-                    r = r.union(&q);
-                }
-                Ok(r)
-            }
-            RegionSpec::Difference { base, subtract } => {
-                if subtract.len() > MAX_PARTS {
-                    return Err(FieldError::new(
-                        f("subtract"),
-                        format!(
-                            "{} regions are more than the {MAX_PARTS} a difference may subtract",
-                            subtract.len()
-                        ),
-                    ));
-                }
-                let mut r = base.build(&f("base"))?;
-                for (k, p) in subtract.iter().enumerate() {
-                    let field = format!("{path}.subtract[{k}]");
-                    let q = p.build(&field)?;
-                    check_pieces(&r, &q, &field)?;
-                    r = r.difference(&q);
-                }
-                Ok(r)
-            }
-            RegionSpec::Ghost { min, size } => {
-                finite(&f("min"), min)?;
-                if !(*size > 0.0 && size.is_finite()) {
-                    return Err(FieldError::new(f("size"), "must be positive"));
-                }
-                let (outline, eyes) = ghost_outline(*min, *size);
-                RegionSpec::Difference {
-                    base: Box::new(RegionSpec::Polygon { vertices: outline }),
-                    subtract: eyes
-                        .into_iter()
-                        .map(|(center, radius)| RegionSpec::Circle {
-                            center,
-                            radius,
-                            tolerance: None,
-                        })
-                        .collect(),
-                }
-                .build(path)
-            }
+            } => spline(points, *closed, close_via, corners, *per_segment, path),
+            RegionSpec::Union { parts } => union(parts, path),
+            RegionSpec::Difference { base, subtract } => difference(base, subtract, path),
+            RegionSpec::Ghost { min, size } => ghost(min, *size, path),
             RegionSpec::Rotated {
                 angle_deg,
                 about,
                 region,
-            } => {
-                finite(&f("angle_deg"), &[*angle_deg])?;
-                finite(&f("about"), about)?;
-                Ok(region.build(&f("region"))?.rotated(*about, angle_deg.to_radians()))
-            }
+            } => rotated(*angle_deg, about, region, path),
         }
     }
+}
+
+/// `rectangle`: finite corners with `max` above and right of `min`.
+fn rectangle(min: &P2, max: &P2, path: &str) -> Result<Region, FieldError> {
+    let f = |name: &str| format!("{path}.{name}");
+    finite(&f("min"), min)?;
+    finite(&f("max"), max)?;
+    if !(max[0] > min[0] && max[1] > min[1]) {
+        return Err(FieldError::new(f("max"), "must exceed `min` in both coordinates"));
+    }
+    Ok(Region::convex(vec![*min, [max[0], min[1]], *max, [min[0], max[1]]]))
+}
+
+/// `polygon`: a simple polygon of positive area, one convex piece or
+/// triangulated.
+fn polygon(vertices: &[P2], path: &str) -> Result<Region, FieldError> {
+    let field = format!("{path}.vertices");
+    let poly = simple_polygon(vertices, &field)?;
+    if geometry::is_convex(&poly) {
+        return Ok(Region::convex(poly));
+    }
+    let tris = geometry::triangulate(&poly)
+        .ok_or_else(|| FieldError::new(field.as_str(), "the polygon could not be triangulated"))?;
+    Ok(Region {
+        pieces: tris
+            .into_iter()
+            .map(|t| geometry::Piece::new(1.0, t.to_vec()))
+            .collect(),
+    })
+}
+
+/// The polygon's vertices checked (count, finite, simple, positive area)
+/// and returned counter-clockwise without collinear vertices; `field`
+/// names the vertices.
+fn simple_polygon(vertices: &[P2], field: &str) -> Result<Vec<P2>, FieldError> {
+    if vertices.len() < 3 {
+        return Err(FieldError::new(field, "a polygon needs at least 3 vertices"));
+    }
+    if vertices.len() > MAX_VERTICES {
+        return Err(FieldError::new(
+            field,
+            format!(
+                "{} vertices are more than the {MAX_VERTICES} a polygon may have",
+                vertices.len()
+            ),
+        ));
+    }
+    finite(field, &vertices.concat())?;
+    if geometry::self_intersects(vertices) {
+        return Err(FieldError::new(field, "the polygon crosses itself"));
+    }
+    let poly = geometry::ccw(geometry::drop_collinear(vertices));
+    // Dropping collinear vertices can turn a crossing through a
+    // shared vertex into a proper one.
+    if geometry::self_intersects(&poly) {
+        return Err(FieldError::new(field, "the polygon crosses itself"));
+    }
+    // A vertex on another edge first: a bowtie whose crossing is a
+    // vertex has zero area but is really a self-touching outline.
+    if let Some(i) = touches_itself(&poly).filter(|_| poly.len() > 3) {
+        return Err(FieldError::new(
+            field,
+            format!(
+                "the polygon touches itself at ({}, {}): a vertex lies on another edge",
+                number(poly[i][0]),
+                number(poly[i][1])
+            ),
+        ));
+    }
+    if geometry::area_centroid(&poly).0 <= 0.0 {
+        return Err(FieldError::new(field, "the polygon has zero area"));
+    }
+    Ok(poly)
+}
+
+/// `circle`: a disc flattened to chords within `tolerance` (default
+/// radius/1e4).
+fn circle(center: &P2, radius: f64, tolerance: Option<f64>, path: &str) -> Result<Region, FieldError> {
+    let f = |name: &str| format!("{path}.{name}");
+    finite(&f("center"), center)?;
+    if !(radius > 0.0 && radius.is_finite()) {
+        return Err(FieldError::new(f("radius"), "must be positive"));
+    }
+    let tol = tolerance.unwrap_or(radius * 1e-4);
+    let n = chord_count(radius, tol, std::f64::consts::TAU, &f("tolerance"), tolerance.is_some())?;
+    let poly = (0..n)
+        .map(|k| {
+            let t = std::f64::consts::TAU * k as f64 / n as f64;
+            [center[0] + radius * t.cos(), center[1] + radius * t.sin()]
+        })
+        .collect();
+    Ok(Region::convex(poly))
+}
+
+/// `annulus-sector`: between radii `r_inner` and `r_outer` and angles
+/// `start_deg` and `end_deg`, one convex piece per angular chord.
+fn annulus_sector(
+    center: &P2,
+    r_inner: f64,
+    r_outer: f64,
+    start_deg: f64,
+    end_deg: f64,
+    tolerance: Option<f64>,
+    path: &str,
+) -> Result<Region, FieldError> {
+    let f = |name: &str| format!("{path}.{name}");
+    finite(&f("center"), center)?;
+    if !(r_inner >= 0.0) {
+        return Err(FieldError::new(f("r_inner"), "must be non-negative"));
+    }
+    if !(r_outer > r_inner && r_outer.is_finite()) {
+        return Err(FieldError::new(f("r_outer"), "must exceed `r_inner`"));
+    }
+    finite(&f("start_deg"), &[start_deg])?;
+    finite(&f("end_deg"), &[end_deg])?;
+    let sweep = (end_deg - start_deg).to_radians();
+    if !(sweep > 0.0 && sweep <= std::f64::consts::TAU + 1e-12) {
+        return Err(FieldError::new(f("end_deg"), "must exceed `start_deg` by at most 360"));
+    }
+    let tol = tolerance.unwrap_or(r_outer * 1e-4);
+    let n = chord_count(r_outer, tol, sweep, &f("tolerance"), tolerance.is_some())?.max(2);
+    let at = |r: f64, k: usize| {
+        let t = start_deg.to_radians() + sweep * k as f64 / n as f64;
+        [center[0] + r * t.cos(), center[1] + r * t.sin()]
+    };
+    // Each angular slice is a convex trapezoid (or a triangle at r_inner = 0).
+    let pieces = (0..n)
+        .map(|k| {
+            let mut q = vec![at(r_inner, k), at(r_outer, k), at(r_outer, k + 1), at(r_inner, k + 1)];
+            if r_inner == 0.0 {
+                q.remove(3);
+            }
+            geometry::Piece::new(1.0, geometry::ccw(q))
+        })
+        .collect();
+    Ok(Region { pieces })
+}
+
+/// `spline`: the B-spline flattened to a polygon (closed by `close_via`
+/// when open), then built as one.
+fn spline(
+    points: &[P2],
+    closed: bool,
+    close_via: &[P2],
+    corners: &[usize],
+    per_segment: Option<usize>,
+    path: &str,
+) -> Result<Region, FieldError> {
+    let f = |name: &str| format!("{path}.{name}");
+    finite(&f("points"), &points.concat())?;
+    let per = per_segment.unwrap_or(64);
+    if !(1..=MAX_PER_SEGMENT).contains(&per) {
+        return Err(FieldError::new(
+            f("per_segment"),
+            format!("must be between 1 and {MAX_PER_SEGMENT}, got {per}"),
+        ));
+    }
+    let vertices = (points.len() as u128 + 1) * per as u128 + close_via.len() as u128;
+    if vertices > MAX_VERTICES as u128 {
+        return Err(FieldError::new(
+            if per_segment.is_some() { f("per_segment") } else { f("points") },
+            format!(
+                "{} points at {per} chords per segment make about {vertices} vertices, more than the {MAX_VERTICES} a polygon may have",
+                points.len()
+            ),
+        ));
+    }
+    let mut marks = vec![false; points.len()];
+    for &c in corners {
+        *marks
+            .get_mut(c)
+            .ok_or_else(|| FieldError::new(f("corners"), format!("no point {c}")))? = true;
+    }
+    let spline =
+        BSpline::interpolate(points, closed, &marks).map_err(|e| FieldError::new(f("points"), e.to_string()))?;
+    let mut poly = spline.sample(per);
+    if closed {
+        poly.pop(); // the last sample repeats the first
+    } else {
+        finite(&f("close_via"), &close_via.concat())?;
+        poly.extend(close_via.iter().copied());
+    }
+    RegionSpec::Polygon { vertices: poly }.build(path)
+}
+
+/// `union`: the parts joined in order, each join checked against
+/// [`MAX_PIECES`].
+fn union(parts: &[RegionSpec], path: &str) -> Result<Region, FieldError> {
+    let field = format!("{path}.parts");
+    if parts.is_empty() {
+        return Err(FieldError::new(field, "a union needs at least one part"));
+    }
+    if parts.len() > MAX_PARTS {
+        return Err(FieldError::new(
+            field,
+            format!("{} parts are more than the {MAX_PARTS} a union may have", parts.len()),
+        ));
+    }
+    let mut r = parts[0].build(&format!("{path}.parts[0]"))?;
+    for (k, p) in parts.iter().enumerate().skip(1) {
+        let field = format!("{path}.parts[{k}]");
+        let q = p.build(&field)?;
+        check_pieces(&r, &q, &field)?;
+        r = r.union(&q);
+    }
+    Ok(r)
+}
+
+/// `difference`: `base` less each of `subtract` in order, each step
+/// checked against [`MAX_PIECES`].
+fn difference(base: &RegionSpec, subtract: &[RegionSpec], path: &str) -> Result<Region, FieldError> {
+    if subtract.len() > MAX_PARTS {
+        return Err(FieldError::new(
+            format!("{path}.subtract"),
+            format!(
+                "{} regions are more than the {MAX_PARTS} a difference may subtract",
+                subtract.len()
+            ),
+        ));
+    }
+    let mut r = base.build(&format!("{path}.base"))?;
+    for (k, p) in subtract.iter().enumerate() {
+        let field = format!("{path}.subtract[{k}]");
+        let q = p.build(&field)?;
+        check_pieces(&r, &q, &field)?;
+        r = r.difference(&q);
+    }
+    Ok(r)
+}
+
+/// `ghost`: [`ghost_outline`] less its eyes, built as a difference.
+fn ghost(min: &P2, size: f64, path: &str) -> Result<Region, FieldError> {
+    finite(&format!("{path}.min"), min)?;
+    if !(size > 0.0 && size.is_finite()) {
+        return Err(FieldError::new(format!("{path}.size"), "must be positive"));
+    }
+    let (outline, eyes) = ghost_outline(*min, size);
+    RegionSpec::Difference {
+        base: Box::new(RegionSpec::Polygon { vertices: outline }),
+        subtract: eyes
+            .into_iter()
+            .map(|(center, radius)| RegionSpec::Circle {
+                center,
+                radius,
+                tolerance: None,
+            })
+            .collect(),
+    }
+    .build(path)
+}
+
+/// `rotated`: `region` turned by `angle_deg` about `about`.
+fn rotated(angle_deg: f64, about: &P2, region: &RegionSpec, path: &str) -> Result<Region, FieldError> {
+    finite(&format!("{path}.angle_deg"), &[angle_deg])?;
+    finite(&format!("{path}.about"), about)?;
+    Ok(region
+        .build(&format!("{path}.region"))?
+        .rotated(*about, angle_deg.to_radians()))
 }
 
 /// Area of the ghost over the area of its box. G 5.2 gives the initial
