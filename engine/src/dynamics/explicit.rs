@@ -117,6 +117,11 @@ impl Plan {
     fn pool(&self) -> Option<&rayon::ThreadPool> {
         self.pool.as_deref()
     }
+
+    /// The step, sub-step and mass the guards name.
+    fn at(&self) -> (usize, f64, MassKind) {
+        (self.step, self.sub.dt, self.kind)
+    }
 }
 
 /// Sub-step `sub` of the next step: the phases in order (see the module's
@@ -127,14 +132,8 @@ pub(super) fn step_with(sim: &mut Simulation, ws: &mut Workspace, sub: Substep) 
     let clock = Instant::now();
     let mut timings = Timings::default();
     let plan = Plan::of(sim, sub);
-    let Workspace {
-        transfer: tr,
-        map,
-        free: v,
-        lumped,
-        weights,
-    } = ws;
-    let bodies = prepare(sim, &plan, tr, weights)?;
+    let (tr, map, v, lumped) = (&mut ws.transfer, &mut ws.map, &mut ws.free, &mut ws.lumped);
+    let bodies = prepare(sim, &plan, tr, &mut ws.weights)?;
     let faces = map_points(sim, &plan, tr, &bodies, map);
     let (mass, pattern_reused) = timed(&mut timings.factorisation, || {
         assemble_mass(sim, &plan, tr, &bodies, map, &faces, lumped)
@@ -145,40 +144,15 @@ pub(super) fn step_with(sim: &mut Simulation, ws: &mut Workspace, sub: Substep) 
     let max_speed = nodal_motion(tr, map, v);
     let (moved, committed) = timed(&mut timings.update, || {
         let (moved, committed) = move_points(sim, &plan, tr, &bodies, map, &mass, v, usf);
-        guards::points(
-            sim,
-            &tr.next,
-            &moved,
-            &committed,
-            (plan.step, plan.dt(), plan.kind),
-            max_speed,
-        )?;
+        guards::points(sim, &tr.next, &moved, &committed, plan.at(), max_speed)?;
         Ok::<_, StepFailure>((moved, committed))
     })?;
     let balance = energies(sim, &plan, v, &moved, &committed)?;
-    let conditioning = timed(&mut timings.condition, || condition(sim, &plan, &faces))?;
-    let grid = GridSummary {
-        unknowns: map.dofs.n_free,
-        active_nodes: map.dofs.active_nodes,
-        ghost_faces: faces.len(),
-        residual_norm: norm(&v.force),
-        kinetic_grid: mass.energy(&v.v_next),
-        max_speed,
-        pattern_reused,
-        boundaries,
-    };
+    let cond = timed(&mut timings.condition, || condition(sim, &plan, &faces))?;
+    let grid = summary(map, &faces, v, &mass, max_speed, pattern_reused, boundaries);
     let errors = commit(sim, &plan, tr, map, &faces, mass, lumped, balance.work);
     timings.total = clock.elapsed().as_secs_f64();
-    Ok(report(
-        sim,
-        &plan,
-        grid,
-        &balance,
-        &moved,
-        conditioning,
-        errors,
-        timings,
-    ))
+    Ok(report(sim, &plan, grid, &balance, &moved, cond, errors, timings))
 }
 
 /// Size the transfer buffers for the points, and cache every point's 1D
@@ -504,6 +478,29 @@ struct GridSummary {
     max_speed: f64,
     pattern_reused: bool,
     boundaries: Vec<BoundaryReport>,
+}
+
+/// What the report says of the grid and the mass, read before [`commit`]
+/// takes the mass (to give the lumped diagonal's buffer back).
+fn summary(
+    map: &Mapping,
+    faces: &[GhostFace],
+    v: &FreeVectors,
+    mass: &MassSolver,
+    max_speed: f64,
+    pattern_reused: bool,
+    boundaries: Vec<BoundaryReport>,
+) -> GridSummary {
+    GridSummary {
+        unknowns: map.dofs.n_free,
+        active_nodes: map.dofs.active_nodes,
+        ghost_faces: faces.len(),
+        residual_norm: norm(&v.force),
+        kinetic_grid: mass.energy(&v.v_next),
+        max_speed,
+        pattern_reused,
+        boundaries,
+    }
 }
 
 /// The sub-step's report (the state committed): time and load factor of
