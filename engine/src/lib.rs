@@ -25,6 +25,7 @@ pub mod basis;
 pub mod boundary;
 pub mod bulk;
 pub mod checkpoint;
+mod cutback;
 pub mod dynamics;
 pub mod exact;
 pub mod field;

@@ -44,7 +44,7 @@ use crate::ibm::IbmBoundary;
 use crate::implicit::{band, contributions, finish, norm, Assembly, Done, Frame, Residual, Response};
 use crate::kinematics::{commit_point, increment_gradient};
 use crate::linalg::{self, Condition, SparseRef};
-use crate::report::{Cutback, SolverReport, StepFailure, StepReport, Timings};
+use crate::report::{SolverReport, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
 use crate::solver::{Factorisation, Symbolic, Symmetry};
 use crate::state::Simulation;
@@ -165,100 +165,17 @@ impl<'a> Setup<'a> {
 }
 
 /// One finite-deformation load step from `lambda_n` to `lambda_{n+1}`: one
-/// increment, or, when it fails, the increment cut back (halved and retried
+/// increment, or, when it fails, the increment cut back: halved and retried
 /// from the last converged state, at most `analysis.max_cutbacks` times in
-/// a row, growing back after easy increments; see [`cut_back`]).
+/// a row, growing back after easy increments
+/// ([`crate::cutback::Policy::load_step`]).
 pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let steps = sim.load_steps();
     let (lambda0, lambda1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
-    match increment(sim, step, lambda0, lambda1, true) {
-        Err(e) if sim.model.analysis.max_cutbacks > 0 && can_cut_back(&e) => cut_back(sim, step, lambda0, lambda1, e),
-        other => other,
-    }
-}
-
-/// Failures a smaller increment may avoid: Newton not converging, non-finite
-/// values, a singular tangent, points pushed out of the grid.
-fn can_cut_back(e: &StepFailure) -> bool {
-    matches!(
-        e,
-        StepFailure::NotConverged { .. }
-            | StepFailure::NonFinite { .. }
-            | StepFailure::Singular { .. }
-            | StepFailure::LeftGrid { .. }
-    )
-}
-
-/// Cut the increment `lambda0 -> lambda1` back after `failure`: halve it
-/// and retry from the last converged state; after an increment that
-/// converged in at most half the iteration limit, double it again (never
-/// past `lambda1`). More than `max_cutbacks` halvings in a row end the step
-/// with the last failure, and the state returns to the start of the step.
-/// Every cutback is in the step's [`SolverReport`].
-fn cut_back(
-    sim: &mut Simulation,
-    step: usize,
-    lambda0: f64,
-    lambda1: f64,
-    failure: StepFailure,
-) -> Result<StepReport, StepFailure> {
-    let max = sim.model.analysis.max_cutbacks;
-    let start = sim.snapshot();
-    let mut cutbacks = vec![Cutback {
-        from: lambda0,
-        to: lambda1,
-        reason: failure.to_string(),
-    }];
-    let (mut at, mut size, mut depth) = (lambda0, 0.5 * (lambda1 - lambda0), 1);
-    let mut substeps = 0;
-    let (mut iterations, mut timings) = (0, Timings::default());
-    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| loop {
-        // The last increment lands exactly on lambda1.
-        let last = at + size >= lambda1 - 1e-12 * (lambda1 - lambda0);
-        let to = if last { lambda1 } else { at + size };
-        match increment(sim, step, at, to, last) {
-            Ok(mut r) => {
-                substeps += 1;
-                iterations += r.iterations;
-                timings.add(&r.timings);
-                if last {
-                    r.iterations = iterations;
-                    r.timings = timings;
-                    if let Some(s) = r.solver.as_mut() {
-                        s.cutbacks = std::mem::take(&mut cutbacks);
-                        s.substeps = substeps;
-                    }
-                    return Ok(r);
-                }
-                at = to;
-                if r.iterations * 2 <= sim.params.max_iterations && depth > 0 {
-                    size *= 2.0;
-                    depth -= 1;
-                }
-            }
-            Err(e) if can_cut_back(&e) && depth < max => {
-                cutbacks.push(Cutback {
-                    from: at,
-                    to,
-                    reason: e.to_string(),
-                });
-                size *= 0.5;
-                depth += 1;
-            }
-            Err(e) => return Err(e),
-        }
-    }));
-    let outcome = outcome.unwrap_or_else(|e| {
-        Err(StepFailure::Internal {
-            step,
-            message: crate::report::panic_message(e.as_ref()),
-        })
-    });
-    if outcome.is_err() {
-        sim.restore(&start);
-    }
-    outcome
+    let policy = crate::cutback::Policy::load_step(sim);
+    let whole = crate::cutback::Span::whole(lambda0, lambda1, lambda1 - lambda0);
+    crate::cutback::step(sim, &policy, whole, |sim, s| increment(sim, step, s.from, s.to, s.last))
 }
 
 /// One increment `lambda0 -> lambda1` of load step `step`, committed with

@@ -28,6 +28,15 @@ pub struct Timings {
     pub total: f64,
 }
 
+/// Run one phase of a step, adding its wall time (s) to `slot`, one of
+/// the step's [`Timings`].
+pub(crate) fn timed<T>(slot: &mut f64, phase: impl FnOnce() -> T) -> T {
+    let start = std::time::Instant::now();
+    let out = phase();
+    *slot += start.elapsed().as_secs_f64();
+    out
+}
+
 impl Timings {
     /// Add another increment's times (load-step cutbacks).
     pub fn add(&mut self, o: &Timings) {

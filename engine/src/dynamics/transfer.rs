@@ -8,7 +8,7 @@
 //! ([`crate::basis::weights_1d`], standard or GIMP) inside the loop:
 //! no stencil array, no dynamic dispatch, no per-point vectors. Every sum
 //! runs over the points in the same order, with the same expressions, as
-//! the stencil-based helpers of [`super`], so the results are the same to
+//! the stencil-based helpers of [`super::mass`], so the results are the same to
 //! the bit. With a thread pool ([`crate::Simulation::set_threads`]) the
 //! stress pass updates the points' materials in parallel chunks and then
 //! sums their forces and energies in point order: the same bits again.
@@ -35,9 +35,8 @@ pub(crate) struct Workspace {
     /// Lumped steps: a mapping with the dofs and active cells only (no
     /// stencils, no groups), refilled in place by [`Transfer::p2g`].
     pub(crate) map: Mapping,
-    /// Free-dof vectors: momentum, `v_n`, `f_ext`, `f_int`, `f_ext - f_int`,
-    /// `a`, `v_{n+1}`.
-    pub(crate) free: [Vec<f64>; 7],
+    /// The step's vectors on the free dofs.
+    pub(crate) free: FreeVectors,
     /// The lumped mass on the free dofs (kg).
     pub(crate) lumped: Vec<f64>,
     /// Per point, its 1D basis factors this step (GIMP scenes; see
@@ -64,6 +63,29 @@ impl Default for Workspace {
     }
 }
 
+/// The explicit step's vectors on the free dofs, one per quantity.
+#[derive(Default)]
+pub(crate) struct FreeVectors {
+    /// `sum_p m_p S_p^T v_p` (kg m/s; G (10)), mapped from the points.
+    pub(crate) momentum: Vec<f64>,
+    /// `v_n = M^-1 momentum` (m/s).
+    pub(crate) v_n: Vec<f64>,
+    /// `f_ext`: body forces, point loads, tractions (N).
+    pub(crate) f_ext: Vec<f64>,
+    /// `f_int = sum_p V0_p P_p grad S` (N).
+    pub(crate) f_int: Vec<f64>,
+    /// `f_ext - f_int` (N), the right-hand side of `M a = f`.
+    pub(crate) force: Vec<f64>,
+    /// `a = M^-1 (f_ext - f_int)` (m/s^2).
+    pub(crate) acceleration: Vec<f64>,
+    /// `v_{n+1} = v_n + dt a` (m/s).
+    pub(crate) v_next: Vec<f64>,
+    /// MUSL: the momentum of the updated point velocities and the grid
+    /// velocities it maps to (kg m/s, m/s).
+    pub(crate) musl_momentum: Vec<f64>,
+    pub(crate) musl_velocity: Vec<f64>,
+}
+
 /// Per grid node and per point: what the passes read and write.
 #[derive(Default)]
 pub(crate) struct Transfer {
@@ -75,10 +97,13 @@ pub(crate) struct Transfer {
     pub(crate) fint: Vec<P2>,
     /// Per grid node: body force `sum_p S_vp m_p g` (N).
     pub(crate) body_force: Vec<P2>,
-    /// Per grid node: the fields a pass reads (increments `dt v` for the
-    /// stress pass; accelerations and `v_{n+1}` for grid to points).
-    pub(crate) nodal_a: Vec<P2>,
-    pub(crate) nodal_b: Vec<P2>,
+    /// Per grid node: the displacement increments `du = dt v` the stress
+    /// pass reads (m).
+    pub(crate) increment: Vec<P2>,
+    /// Per grid node: the accelerations `a` and the velocities `v_{n+1}`
+    /// grid to points reads (m/s^2, m/s).
+    pub(crate) acceleration: Vec<P2>,
+    pub(crate) velocity: Vec<P2>,
     /// Per grid node: touched by a point with volume this step.
     active: Vec<bool>,
     /// Per grid cell: reached by a point's basis this step.
@@ -569,7 +594,7 @@ impl Transfer {
     }
 
     /// The stress pass over the points, with the nodal increments `du`
-    /// (m, per grid node) in [`Transfer::nodal_a`]: per point
+    /// (m, per grid node) in [`Transfer::increment`]: per point
     /// `dF = I + sum_v du_v (x) grad S_v` and the material's response
     /// (points with `V0 > 0`). With `forces = Some(gravity)` (m/s^2): the
     /// nodal internal force `sum_p V0_p P_p grad S` (`P = tau dF^-T`) and
@@ -601,7 +626,7 @@ impl Transfer {
             dissipation: 0.0,
             strained: (0.0, 0),
         };
-        let (du, fint, body_force) = (&self.nodal_a, &mut self.fint, &mut self.body_force);
+        let (du, fint, body_force) = (&self.increment, &mut self.fint, &mut self.body_force);
         let mut next = NextSlices::of(&mut self.next);
         let mut forces = Forces {
             fint,
@@ -669,8 +694,8 @@ impl Transfer {
     }
 
     /// Grid to points with the nodal accelerations `a` in
-    /// [`Transfer::nodal_a`] and new velocities `v_{n+1}` in
-    /// [`Transfer::nodal_b`] (m/s^2, m/s): FLIP `v_p += dt sum S a` or PIC
+    /// [`Transfer::acceleration`] and new velocities `v_{n+1}` in
+    /// [`Transfer::velocity`] (m/s^2, m/s): FLIP `v_p += dt sum S a` or PIC
     /// `v_p = sum S v`, and `x_p += dt sum S v` into [`Transfer::next`].
     pub(crate) fn g2p(&mut self, grid: &Grid, pts: &Points, bodies: &Bodies, dt: f64, flip: bool) -> Moved {
         let mut out = Moved {
@@ -679,7 +704,7 @@ impl Transfer {
             kinetic: 0.0,
             momentum: [0.0; 2],
         };
-        let (an, vn, next) = (&self.nodal_a, &self.nodal_b, &mut self.next);
+        let (an, vn, next) = (&self.acceleration, &self.velocity, &mut self.next);
         for p in 0..pts.len() {
             let w = bodies.weights(grid, pts, p);
             let (mut a, mut v) = ([0.0; 2], [0.0; 2]);
@@ -790,8 +815,8 @@ load_steps = 1
             tr.prepare(grid, &sim.model.dirichlet, pts.len()).unwrap();
             let mut v = [0.0; 2];
             v[axis] = f64::INFINITY;
-            tr.nodal_a = vec![[0.0; 2]; grid.num_nodes()];
-            tr.nodal_b = vec![v; grid.num_nodes()];
+            tr.acceleration = vec![[0.0; 2]; grid.num_nodes()];
+            tr.velocity = vec![v; grid.num_nodes()];
             let moved = tr.g2p(grid, pts, &bodies, 0.01, false);
             assert!(
                 !tr.next.v[0][axis].is_finite() && tr.next.v[0][1 - axis] == 0.0,

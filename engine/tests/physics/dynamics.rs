@@ -1301,7 +1301,7 @@ fn explicit_cutbacks_halve_the_sub_step_where_it_failed() {
     // most three times: as its speed passes 2, 4 and 8 m/s, steps, their
     // halves and then their quarters move points more than a cell, until a
     // point leaves the 3 m grid (step 8). Each cut is recorded where it
-    // happened (`dynamics::advance`): the whole step [t_n, t_n + dt]
+    // happened (`cutback::push_halves`): the whole step [t_n, t_n + dt]
     // first, then each failing half, quarter or eighth, spanning dt / 2^j
     // (j <= max_cutbacks) and starting on that binary grid inside the
     // step. The later parts fail first here (the ghost is faster at their
@@ -1381,7 +1381,7 @@ fn a_failing_second_quarter_is_cut_back_no_deeper_than_allowed() {
     // beyond the ghost's round-off. So:
     // - max_cutbacks = 2: the fourth quarter, two halvings deep already,
     //   is not cut again, and the step fails with the state at its start
-    //   (`dynamics::advance` passes depth + 1 to both halves of a part);
+    //   (`cutback::push_halves` gives both halves of a part depth + 1);
     // - max_cutbacks = 3: the step is the first half's two quarters, the
     //   third quarter and the fourth quarter's two eighths, cut at the
     //   whole step, its halves and the fourth quarter.
@@ -1433,7 +1433,7 @@ fn a_step_cut_back_inside_its_cells_reuses_the_mass_pattern() {
     // where they end): no point changes cell, so every attempt of the
     // step maps the same blocks. The failed whole step factorises the
     // pattern, both halves reuse it, and the step reports the pattern reused
-    // (`dynamics::Merged::add`: reused only if every sub-step reused it).
+    // (`cutback::Merged::add`: reused only if every sub-step reused it).
     let body = r#"
 [[body]]
 name = "block"
@@ -1475,7 +1475,7 @@ fn a_step_whose_middle_sub_step_changes_cells_does_not_reuse_the_mass_pattern() 
     // the second quarter in the next cell ([0.41, 0.42] m: a new pattern),
     // the second half still there ([0.48, 0.49] m: reused). Margins: 0.012
     // m from the cells' edges. The step reused the pattern only if every
-    // sub-step did (`dynamics::Merged::add`): not here, though its first
+    // sub-step did (`cutback::Merged::add`): not here, though its first
     // and last sub-steps did.
     let body = r#"
 [[body]]
@@ -1517,7 +1517,7 @@ fn a_gimp_domain_a_ten_thousandth_of_a_millimetre_cell_past_the_edge_has_left_th
     // one explicit step of 1e-4 s at speed v along x (stress-free, a uniform
     // velocity the lumped mass reproduces) the domain ends v 1e-4 m
     // past the edge. The edge's tolerance is round-off of the cell (1e-9
-    // h, `dynamics::gimp_domains_inside`): a domain past it by 1e-10 h
+    // h, `dynamics::explicit::gimp_domains_inside`): a domain past it by 1e-10 h
     // stays in the grid, one past it by 1e-4 h (0.1 um) has left it, in
     // millimetres as in metres.
     let run = |past: f64| {

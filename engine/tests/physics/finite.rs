@@ -736,7 +736,7 @@ fn prescribed_grid_displacement_work_is_the_strain_energy() {
 
 #[test]
 fn cutback_sizes_follow_each_sub_steps_newton_iterations() {
-    // The rule of `newton::cut_back`, replayed from what each step did:
+    // The rule of `cutback::Pending::Regrow`, replayed from what each step did:
     // each Newton attempt of a step starts at iteration 0 of the progress
     // hook and ends converged (relative residual at or below the
     // tolerance) or not (the iteration limit). The whole increment fails
@@ -835,7 +835,7 @@ fn cutback_sizes_follow_each_sub_steps_newton_iterations() {
 fn cutbacks_halve_the_increment_from_the_last_converged_state() {
     // G 5.2's beam in 4 load steps with Newton held to 7 iterations: steps
     // 1 and 2 are cut back (step 2 twice), so a cut from a non-zero load
-    // factor is seen. The rule (`newton::cut_back`): the failed increment
+    // factor is seen. The rule (`cutback::Pending::Regrow`): the failed increment
     // lambda_n -> lambda_(n+1) is the first cutback; then the increment is
     // halved at each failure and doubled after an easy one, always from
     // the last converged state and never past lambda_(n+1). So every later
@@ -890,7 +890,7 @@ fn a_sub_step_failing_after_a_doubling_is_cut_no_deeper_than_allowed() {
     // steps, Newton held to 10 iterations. Step 1 grows harder as it goes:
     // the whole third fails, then its half; the first quarter converges in
     // 5 iterations (at most half the limit), so the size doubles back to a
-    // half and the depth drops to 1 (`newton::cut_back`); that half fails
+    // half and the depth drops to 1 (`cutback::Pending::Regrow`); that half fails
     // and so does its half, and eighths of Delta = 1/3 reach lambda_1.
     // Cutbacks: (0, 1/3), (0, 1/6), (1/12, 1/4), (1/12, 1/6), the last
     // two at depths 1 and 2 after the doubling, so 3 cutbacks allowed
