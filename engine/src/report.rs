@@ -144,6 +144,36 @@ pub struct StepReport {
 }
 
 impl StepReport {
+    /// The report of step `step` of `load_steps` at `load_factor` with
+    /// nothing else yet: every driver builds its report from this, setting
+    /// what it has (a field added here needs a default and the drivers
+    /// that fill it, nothing else).
+    pub(crate) fn new(step: usize, load_steps: usize, load_factor: f64) -> StepReport {
+        StepReport {
+            step,
+            load_steps,
+            load_factor,
+            unknowns: 0,
+            active_nodes: 0,
+            active_cells: 0,
+            residual_norm: 0.0,
+            residuals: Vec::new(),
+            timings: Timings::default(),
+            energy: Energy::default(),
+            condition: None,
+            condition_unstabilised: None,
+            iterations: 0,
+            ghost_faces: 0,
+            ibm: Vec::new(),
+            errors: Vec::new(),
+            max_increment: 0.0,
+            boundaries: Vec::new(),
+            dynamics: None,
+            solver: None,
+            probes: Vec::new(),
+        }
+    }
+
     /// Every failed attempt of the step that was cut back, in order: the
     /// Newton increments of a quasi-static step, the time steps of an
     /// explicit one.

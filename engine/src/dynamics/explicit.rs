@@ -525,14 +525,10 @@ fn report(
         },
     };
     StepReport {
-        step: plan.step,
-        load_steps: plan.steps,
-        load_factor: load_factor(plan),
         unknowns: grid.unknowns,
         active_nodes: grid.active_nodes,
         active_cells: sim.state.active_cells.len(),
         residual_norm: grid.residual_norm,
-        residuals: Vec::new(),
         timings,
         energy: Energy {
             strain: balance.strain,
@@ -543,9 +539,7 @@ fn report(
         },
         condition,
         condition_unstabilised,
-        iterations: 0,
         ghost_faces: grid.ghost_faces,
-        ibm: Vec::new(),
         errors,
         max_increment: grid.max_speed * plan.dt(),
         boundaries: grid.boundaries,
@@ -565,7 +559,6 @@ fn report(
             cutbacks: Vec::new(),
             substeps: 1,
         }),
-        solver: None,
-        probes: Vec::new(),
+        ..StepReport::new(plan.step, plan.steps, load_factor(plan))
     }
 }

@@ -273,9 +273,6 @@ pub(crate) fn finish(
     let errors = sim.exact_errors(lambda1);
     timings.total = start.elapsed().as_secs_f64();
     StepReport {
-        step,
-        load_steps: sim.load_steps(),
-        load_factor: lambda1,
         unknowns: frame.unknowns,
         active_nodes: frame.active_nodes,
         active_cells,
@@ -286,8 +283,8 @@ pub(crate) fn finish(
             strain: done.strain_energy,
             external_work: sim.state.external_work,
             plastic_dissipation: done.dissipation,
-            kinetic: 0.0,
             ghost: sim.state.ghost_energy,
+            ..Energy::default()
         },
         condition: done.condition.0,
         condition_unstabilised: done.condition.1,
@@ -297,8 +294,7 @@ pub(crate) fn finish(
         errors,
         max_increment,
         boundaries: done.boundaries,
-        dynamics: None,
         solver: Some(done.solver),
-        probes: Vec::new(),
+        ..StepReport::new(step, sim.load_steps(), lambda1)
     }
 }
