@@ -8,12 +8,15 @@
 //! - [`crate::dynamics`]: explicit dynamics (G 2.3): map, mass, momentum,
 //!   forces, velocities, points.
 //!
-//! Every method is a contribution the drivers collect: material points
-//! ([`crate::bulk`] for finite deformation), ghost faces ([`crate::ghost`]),
-//! implicit boundaries ([`crate::ibm`]), tractions on B-spline boundaries
-//! ([`crate::boundary`]), body forces and point loads
-//! ([`Simulation::nodal_forces`]). The data they read and commit is in
-//! [`crate::state`], what they report in [`crate::report`].
+//! The two implicit drivers share one core (`crate::implicit`): every
+//! method is a contribution to a step's residual and tangent, collected in
+//! one list (material points, ghost penalty, implicit boundaries' band,
+//! dead loads, tractions on B-spline boundaries), over one frame (the
+//! mapping, the implicit boundaries' `d^a`, the ghost faces), committed
+//! and reported by one function. The cutback layer
+//! (`crate::cutback`) halves a failed load or time increment for every
+//! driver. The data they read and commit is in [`crate::state`], what
+//! they report in [`crate::report`].
 //!
 //! Failures are values ([`StepFailure`]) and leave the state at the last
 //! good step.
