@@ -95,3 +95,21 @@ pub fn events(path: &std::path::Path) -> Vec<String> {
         })
         .collect()
 }
+
+/// The step a failed run names in its message (`step N failed`): the
+/// engine's failing step, which the outputs of a failed run must agree
+/// with. Which step fails is the engine tests' business (for the plain
+/// GIMP beam round-off picks it, `engine/tests/physics/finite.rs`).
+pub fn failed_step(text: &str) -> usize {
+    let (_, rest) = text
+        .split_once("step ")
+        .and_then(|(a, b)| b.contains(" failed").then_some((a, b)))
+        .unwrap_or_else(|| panic!("no `step N failed` in: {text}"));
+    let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
+    let n: usize = digits.parse().unwrap_or_else(|_| panic!("no step number in: {text}"));
+    assert!(
+        text.contains(&format!("step {n} failed")),
+        "the first `step N` is not the failure: {text}"
+    );
+    n
+}

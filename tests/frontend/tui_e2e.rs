@@ -58,8 +58,7 @@ fn session(dir: &std::path::Path, args: &str, keys: &[(&str, u64)]) -> (std::pro
 /// run, and `tui --resume` opens it and records where it branched from.
 #[test]
 fn checkpoint_and_paraview_series_from_the_terminal() {
-    if Command::new("script").arg("--version").output().is_err() {
-        eprintln!("skipped: util-linux `script` is not installed");
+    if !has_script() {
         return;
     }
     let dir = common::temp_path("e2e-ckpt", "d");
@@ -112,8 +111,7 @@ fn checkpoint_and_paraview_series_from_the_terminal() {
 
 #[test]
 fn step_change_delta_redo_and_quit_in_a_terminal() {
-    if Command::new("script").arg("--version").output().is_err() {
-        eprintln!("skipped: util-linux `script` is not installed");
+    if !has_script() {
         return;
     }
     let rrd = common::temp_path("e2e", "rrd");
@@ -143,4 +141,19 @@ fn step_change_delta_redo_and_quit_in_a_terminal() {
     assert!(ev.iter().any(|e| e.starts_with("parameter: delta/h = 1e-7")), "{ev:?}");
     assert!(ev.iter().any(|e| e.starts_with("redo of step 1")), "{ev:?}");
     assert!(ev.iter().any(|e| e.contains("end of interactive session")), "{ev:?}");
+}
+
+/// Whether util-linux `script` (the pseudo-terminal these tests type into)
+/// can be started: under CI its absence fails the test with its name
+/// (`.ci/run` installs it), elsewhere the test is skipped with a message.
+fn has_script() -> bool {
+    if let Err(e) = Command::new("script").arg("--version").output() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "the terminal tests need util-linux `script`: {e} (.ci/run installs Debian's bsdutils)"
+        );
+        eprintln!("skipped: util-linux `script` is not installed: {e}");
+        return false;
+    }
+    true
 }

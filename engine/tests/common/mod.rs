@@ -127,3 +127,14 @@ pub fn assert_binary_part(part: (f64, f64), whole: (f64, f64), max_depth: usize,
         "{what}: {from} -> {to} is not on {size} / 2^j's grid from {start}"
     );
 }
+
+/// How many saved failure seeds proptest loads for the test module at
+/// `source` (its `file!()`), the way a run of its `proptest!` tests loads
+/// them before new cases: from `proptest-regressions/` beside the test
+/// binary's `main.rs` folder (`engine/tests/proptest-regressions/NAME.txt`).
+pub fn saved_seeds(source: &'static str) -> usize {
+    use proptest::test_runner::{FailurePersistence, FileFailurePersistence};
+    FileFailurePersistence::SourceParallel("proptest-regressions")
+        .load_persisted_failures2(Some(source))
+        .len()
+}

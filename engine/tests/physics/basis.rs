@@ -84,3 +84,10 @@ proptest! {
         }
     }
 }
+
+/// The seeds of this module's past property failures are where proptest
+/// reads them, so every run replays them first (the file holds 1).
+#[test]
+fn saved_failure_seeds_replay() {
+    assert_eq!(crate::common::saved_seeds(file!()), 1);
+}

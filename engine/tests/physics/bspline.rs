@@ -600,3 +600,10 @@ fn the_global_parameter_runs_from_0_to_1_at_the_segments_spans() {
         );
     }
 }
+
+/// The seeds of this module's past property failures are where proptest
+/// reads them, so every run replays them first (the file holds 4).
+#[test]
+fn saved_failure_seeds_replay() {
+    assert_eq!(crate::common::saved_seeds(file!()), 4);
+}

@@ -1328,3 +1328,10 @@ fn plate_hole_dirichlet_holds_its_exact_field_in_each_load_step() {
     let second = two.step().unwrap_or_else(|f| panic!("{f}")).ibm[0].violation;
     assert!(second <= one, "step 2: {second:e}, one step {one:e}");
 }
+
+/// The seeds of this module's past property failures are where proptest
+/// reads them, so every run replays them first (the file holds 2).
+#[test]
+fn saved_failure_seeds_replay() {
+    assert_eq!(crate::common::saved_seeds(file!()), 2);
+}

@@ -111,3 +111,10 @@ fn circle_and_annulus_volume_match_their_polygons() {
     let exact = std::f64::consts::PI * (4.5f64.powi(2) - 1.0) / 4.0;
     assert!((v - exact).abs() < 2e-4 * exact, "{v} vs {exact}");
 }
+
+/// The seeds of this module's past property failures are where proptest
+/// reads them, so every run replays them first (the file holds 1).
+#[test]
+fn saved_failure_seeds_replay() {
+    assert_eq!(crate::common::saved_seeds(file!()), 1);
+}
