@@ -1553,15 +1553,15 @@ fn files_that_are_not_scenes_are_refused_before_reading() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains(":3:") && err.contains("field `scene`"), "{err}");
 
-    // A FIFO would block a reader forever: refused without opening it.
+    // A FIFO would block a reader forever (no writer ever comes): that
+    // the run returns at all, with the FIFO named, shows it was refused
+    // without being opened.
     let fifo = dir.join("fifo.toml");
     let made = std::process::Command::new("mkfifo").arg(&fifo).status().unwrap();
     assert!(made.success());
-    let start = std::time::Instant::now();
     let (code, _, err) = run(&fifo);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("not a regular file (a FIFO)"), "{err}");
-    assert!(start.elapsed().as_secs() < 10);
     // `run` too, and `list` does not hang on it.
     let (code, _, _) = mpmlab(&["run", fifo.to_str().unwrap()]);
     assert_eq!(code, 2);

@@ -6,10 +6,19 @@ use std::io::Write;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-/// Run the binary's TUI with `args` in a pseudo-terminal in `dir`, press
-/// `keys` (each with its wait in ms); the exit status and the screen text
-/// (escape sequences as spaces, runs of spaces collapsed).
-fn session(dir: &std::path::Path, args: &str, keys: &[(&str, u64)]) -> (std::process::ExitStatus, String, String) {
+/// A key to press and what the screen must show after it before the next
+/// key goes in (`None`: nothing to wait for, as for the last `q`).
+type Key<'a> = (&'a str, Option<&'a str>);
+
+/// The longest a session waits for what it expects before it fails: a
+/// guard against a hang, not a pace (every key waits for its text).
+const PATIENCE: Duration = Duration::from_secs(120);
+
+/// Run the binary's TUI with `args` in a pseudo-terminal in `dir`: wait for
+/// its first screen to show `first`, then press each key and wait until
+/// the screen drawn after it shows the text it names. The exit status and
+/// the screen text (escape sequences as spaces, runs of spaces collapsed).
+fn session(dir: &std::path::Path, args: &str, first: &str, keys: &[Key]) -> (std::process::ExitStatus, String, String) {
     let cmd = format!(
         "stty cols 100 rows 30; exec '{}' tui {args}",
         env!("CARGO_BIN_EXE_mpmlab")
@@ -24,14 +33,139 @@ fn session(dir: &std::path::Path, args: &str, keys: &[(&str, u64)]) -> (std::pro
         .spawn()
         .unwrap();
     let mut input = child.stdin.take().unwrap();
-    std::thread::sleep(Duration::from_millis(800));
-    for (k, wait_ms) in keys {
+    let output = std::sync::Arc::new(std::sync::Mutex::new(Vec::<u8>::new()));
+    let reader = {
+        let (output, mut stdout) = (output.clone(), child.stdout.take().unwrap());
+        std::thread::spawn(move || {
+            use std::io::Read;
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = stdout.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                output.lock().unwrap().extend_from_slice(&buf[..n]);
+            }
+        })
+    };
+    let seen = || output.lock().unwrap().len();
+    wait_for(&output, 0, first);
+    for (k, expect) in keys {
+        let from = seen();
         let _ = input.write_all(k.as_bytes()).and_then(|_| input.flush());
-        std::thread::sleep(Duration::from_millis(*wait_ms));
+        if let Some(text) = expect {
+            wait_for(&output, from, text);
+        }
     }
     drop(input);
-    let out = child.wait_with_output().unwrap();
-    let raw = String::from_utf8_lossy(&out.stdout);
+    let status = child.wait().unwrap();
+    reader.join().unwrap();
+    let mut err = String::new();
+    if let Some(mut e) = child.stderr.take() {
+        use std::io::Read;
+        let _ = e.read_to_string(&mut err);
+    }
+    let raw = output.lock().unwrap().clone();
+    (status, screen_text(&raw), err)
+}
+
+/// Wait until the screen, as the terminal shows it after the output up to
+/// now, shows `text` (and did not already before byte `from`, when the key
+/// went in); fail naming it after [`PATIENCE`].
+fn wait_for(output: &std::sync::Mutex<Vec<u8>>, from: usize, text: &str) {
+    let until = std::time::Instant::now() + PATIENCE;
+    let before = terminal(&output.lock().unwrap()[..from]);
+    loop {
+        let screen = terminal(&output.lock().unwrap());
+        if screen.contains(text) && (screen != before || !before.contains(text)) {
+            return;
+        }
+        assert!(
+            std::time::Instant::now() < until,
+            "the screen never showed `{text}`; it shows:\n{screen}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The 100 x 30 screen a terminal shows after `raw`: the cursor moves and
+/// clears ratatui sends (it redraws only the cells that changed, so the
+/// text of a line is only whole on the screen), colours ignored; rows
+/// with runs of spaces collapsed, joined by newlines.
+fn terminal(raw: &[u8]) -> String {
+    let (w, h) = (100usize, 30usize);
+    let mut grid = vec![vec![' '; w]; h];
+    let (mut row, mut col) = (0usize, 0usize);
+    let text = String::from_utf8_lossy(raw);
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '\x1b' => match chars.next() {
+                Some('[') => {
+                    let mut params = String::new();
+                    let mut last = ' ';
+                    for d in chars.by_ref() {
+                        if ('\x40'..='\x7e').contains(&d) {
+                            last = d;
+                            break;
+                        }
+                        params.push(d);
+                    }
+                    let nums: Vec<usize> = params
+                        .trim_start_matches('?')
+                        .split(';')
+                        .map(|p| p.parse().unwrap_or(0))
+                        .collect();
+                    let n = |i: usize| nums.get(i).copied().filter(|&v| v > 0).unwrap_or(1);
+                    match last {
+                        'H' | 'f' => (row, col) = (n(0) - 1, n(1) - 1),
+                        'A' => row = row.saturating_sub(n(0)),
+                        'B' => row += n(0),
+                        'C' => col += n(0),
+                        'D' => col = col.saturating_sub(n(0)),
+                        'G' => col = n(0) - 1,
+                        'J' if nums.first() == Some(&2) => grid.iter_mut().for_each(|r| r.fill(' ')),
+                        'K' if row < h => grid[row][col.min(w)..].fill(' '),
+                        _ => {}
+                    }
+                }
+                Some(']') => {
+                    // An operating-system command, to BEL or ESC \.
+                    while let Some(d) = chars.next() {
+                        if d == '\x07' || (d == '\x1b' && chars.next_if_eq(&'\\').is_some()) {
+                            break;
+                        }
+                    }
+                }
+                _ => {}
+            },
+            '\r' => col = 0,
+            '\n' => row += 1,
+            '\x08' => col = col.saturating_sub(1),
+            c if c.is_control() => {}
+            c => {
+                if row < h && col < w {
+                    grid[row][col] = c;
+                }
+                col += 1;
+            }
+        }
+    }
+    grid.iter()
+        .map(|r| {
+            r.iter()
+                .collect::<String>()
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Terminal output as screen text: escape sequences as spaces, runs of
+/// spaces collapsed.
+fn screen_text(raw: &[u8]) -> String {
+    let raw = String::from_utf8_lossy(raw);
     let mut screen = String::new();
     let mut chars = raw.chars().peekable();
     while let Some(c) = chars.next() {
@@ -49,8 +183,7 @@ fn session(dir: &std::path::Path, args: &str, keys: &[(&str, u64)]) -> (std::pro
             screen.push(c);
         }
     }
-    let screen = screen.split_whitespace().collect::<Vec<_>>().join(" ");
-    (out.status, screen, String::from_utf8_lossy(&out.stderr).into_owned())
+    screen.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// `V` writes a ParaView series from the current step, `w` a checkpoint;
@@ -67,15 +200,14 @@ fn checkpoint_and_paraview_series_from_the_terminal() {
     let scene = common::scene_path("rigid-footing");
     let s = scene.display();
     let keys = [
-        ("V", 800),
-        (" ", 1200),
-        (" ", 1200),
-        ("w", 800),
-        ("V", 800),
-        ("q", 300),
-        ("q", 300),
+        ("V", Some("ParaView series:")),
+        (" ", Some("step 1/20")),
+        (" ", Some("step 2/20")),
+        ("w", Some("checkpoint of step 2")),
+        ("V", Some("ParaView series closed")),
+        ("q", None),
     ];
-    let (status, screen, err) = session(&dir, &format!("'{s}' --no-record"), &keys);
+    let (status, screen, err) = session(&dir, &format!("'{s}' --no-record"), "rigid-footing", &keys);
     assert!(status.success(), "{status:?} {err} {screen}");
     assert!(screen.contains("step 2/20"), "{screen}");
     // The series: the state it started from and the two steps.
@@ -98,7 +230,7 @@ fn checkpoint_and_paraview_series_from_the_terminal() {
     // The TUI opens it at step 2; its recording says where it came from.
     let rrd = dir.join("branch.rrd");
     let args = format!("'{s}' --resume '{}' --record '{}'", ck.display(), rrd.display());
-    let (status, screen, err) = session(&dir, &args, &[(" ", 1500), ("q", 300), ("q", 300)]);
+    let (status, screen, err) = session(&dir, &args, "step 2/20", &[(" ", Some("step 3/20")), ("q", None)]);
     assert!(status.success(), "{status:?} {err} {screen}");
     assert!(screen.contains("step 3/20"), "{screen}");
     let ev = common::events(&rrd);
@@ -116,16 +248,16 @@ fn step_change_delta_redo_and_quit_in_a_terminal() {
     }
     let rrd = common::temp_path("e2e", "rrd");
     let keys = [
-        (" ", 1500),   // the load step
-        ("d", 300),    // delta/h / 10: a parameter change
-        ("r", 2000),   // redo the step with it
-        ("\x1b", 300), // close the comparison
-        ("q", 300),
-        ("q", 300), // (a second q in case a step still ran)
+        (" ", Some("step 1/1")),             // the load step
+        ("d", Some("delta/h = 1.0e-7")),     // delta/h / 10: a parameter change
+        ("r", Some("redo: before / after")), // redo the step with it
+        ("\x1b", Some("step 1/1")),          // close the comparison
+        ("q", None),
     ];
     let (status, screen, err) = session(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")),
         &format!("scenarios/block-roller-30.toml --record '{}'", rrd.display()),
+        "block-roller-30",
         &keys,
     );
     assert!(
