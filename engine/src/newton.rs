@@ -108,8 +108,6 @@ struct Setup<'a> {
     start_loads: crate::state::Forces,
     /// Each boundary at the start of the step, for the report.
     boundaries: Vec<BoundaryReport>,
-    /// Whether a traction loads the step (its load moves with the points).
-    traction: bool,
 }
 
 impl<'a> Setup<'a> {
@@ -131,7 +129,6 @@ impl<'a> Setup<'a> {
         let dead: Vec<f64> = start_loads.ext.iter().map(|f| lambda1 * f).collect();
         let boundaries = sim.add_tractions(&frame.map, step, lambda1, &mut start_loads.ext)?;
         let list = contributions(&frame, Response::Finite, dead)?;
-        let traction = sim.model.boundaries.iter().any(|b| b.traction.is_some());
         let t = Instant::now();
         let assembly = Assembly::new(&frame, list)?;
         let pattern_time = t.elapsed().as_secs_f64();
@@ -143,7 +140,6 @@ impl<'a> Setup<'a> {
             assembly,
             start_loads,
             boundaries,
-            traction,
         })
     }
 
@@ -451,7 +447,9 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
     crate::state::check_points(&sim.model.grid, &pts, step, &solved.residuals)?;
     let forces = &setup.start_loads;
     let mut work = 0.0;
-    let traction = setup.traction;
+    // A traction's load moves with the points: its work is trapezoidal
+    // between the loads at the step's start and at its end.
+    let traction = sim.model.boundaries.iter().any(|b| b.traction.is_some());
     for (n, dofs) in map.dofs.node_dof.iter().enumerate() {
         for c in 0..2 {
             match dofs[c] {

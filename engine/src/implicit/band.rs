@@ -200,7 +200,6 @@ pub(crate) fn finite_reports(
 ) -> Result<(Vec<IbmReport>, f64), StepFailure> {
     let (sim, map, step) = (frame.sim, &frame.map, frame.step);
     let (lambda0, lambda1) = (frame.lambda0, frame.lambda1);
-    let forces_ext = start_ext;
     // Out-of-balance of the points at the start (zero increment) and
     // the end of the step: the implicit boundaries' reactions.
     let zero = vec![[0.0; 2]; d.len()];
@@ -221,7 +220,7 @@ pub(crate) fn finite_reports(
         }
         out
     };
-    let r0 = per_node(&it0.fint_free, &it0.fint_fixed, &|i| lambda0 * forces_ext[i]);
+    let r0 = per_node(&it0.fint_free, &it0.fint_fixed, &|i| lambda0 * start_ext[i]);
     let r1 = per_node(&it.fint_free, &it.fint_fixed, &|i| fext[i]);
     let (reports, w) = s.reports(
         &sim.model.grid,
