@@ -153,6 +153,21 @@ impl Policy {
     }
 }
 
+impl Policy {
+    /// The implicit dynamic time step (`newmark.rs`): Newton's failures
+    /// are retried as in [`Policy::load_step`] (a time step too long for
+    /// Newton's region of convergence, e.g. at an impact), and the
+    /// increments grow back after easy ones ([`Schedule::Regrow`]): the
+    /// time step adapts to Newton's iteration count within each step and
+    /// the step ends at `n dt`, where the user asked for output.
+    pub(crate) fn implicit_time_step(sim: &Simulation) -> Policy {
+        Policy {
+            merge: Merge::Load,
+            ..Policy::load_step(sim)
+        }
+    }
+}
+
 /// Step `whole` with `attempt`: the whole interval at once, or, when that
 /// fails with a failure `policy` retries and `max_cutbacks > 0`, cut back
 /// ([`cut_back`]). `attempt` runs one increment over a [`Span`] from the
@@ -424,6 +439,10 @@ impl Merged {
         let mut r = self.last.expect("a step cut back has at least two sub-steps");
         r.iterations = self.iterations;
         r.timings = self.timings;
+        if let Some(d) = r.dynamics.as_mut() {
+            d.cutbacks = self.cutbacks.clone();
+            d.substeps = self.substeps;
+        }
         if let Some(s) = r.solver.as_mut() {
             s.cutbacks = self.cutbacks;
             s.substeps = self.substeps;

@@ -32,7 +32,7 @@ pub(crate) mod transfer;
 
 pub use crate::report::{Conditioning, DynamicsReport};
 pub(crate) use conditioning::conditioning;
-pub(crate) use mass::grid_velocities;
+pub(crate) use mass::{grid_velocities, GridMass};
 
 /// One explicit step of `dt = duration / load_steps` (s): the whole step,
 /// or, when it fails with a failure a smaller time step may avoid and
@@ -61,6 +61,16 @@ fn substep(sim: &mut Simulation, s: Substep) -> Result<StepReport, StepFailure> 
     let out = explicit::step_with(sim, &mut ws, s);
     sim.explicit = ws;
     out
+}
+
+/// The masses' conditioning and CFL numbers (G 3.5) of the points where
+/// they are, for implicit dynamics' report: the explicit step's limit the
+/// implicit one is not bound by.
+pub(crate) fn mass_conditioning(sim: &Simulation) -> Result<Conditioning, crate::linalg::FactorError> {
+    let (model, grid) = (&sim.model, &sim.model.grid);
+    let map = crate::assembly::Mapping::build(grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0)?;
+    let faces = crate::ghost::faces_of(grid, &map, model.analysis.ghost_cells);
+    conditioning::conditioning_on(sim, &map, &faces)
 }
 
 fn norm(v: &[f64]) -> f64 {

@@ -39,6 +39,7 @@ pub mod linalg;
 pub mod linear;
 pub mod material;
 pub mod model;
+mod newmark;
 mod newton;
 pub mod points;
 pub mod probe;

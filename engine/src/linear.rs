@@ -17,7 +17,7 @@
 use crate::assembly::{Dof, Mapping};
 use crate::geometry::P2;
 use crate::ibm::{self, IbmReport};
-use crate::implicit::{band, contributions, finish, norm, Assembly, At, Done, Frame, Response};
+use crate::implicit::{band, contributions, finish, norm, Assembly, At, Done, Frame, Interval, Response};
 use crate::linalg::{self, Condition, Eigen, SparseRef};
 use crate::material::mul3;
 use crate::points::Points;
@@ -128,8 +128,8 @@ impl<'a> Setup<'a> {
         timings: &mut Timings,
     ) -> Result<Setup<'a>, StepFailure> {
         let start = Instant::now();
-        let frame = Frame::new(sim, ibm_now, step, (lambda0, lambda1), false)?;
-        let list = contributions(&frame, Response::Linear, Vec::new())?;
+        let frame = Frame::new(sim, ibm_now, step, Interval::quasi_static(lambda0, lambda1), false)?;
+        let list = contributions(&frame, Response::Linear, Vec::new(), None)?;
         // What the implicit boundaries' prescribed motion d^a does at d = 0:
         // the band's, the in-band points' and the ghost penalty's f_d.
         let mut f_d = vec![[0.0; 2]; sim.model.grid.num_nodes()];

@@ -41,7 +41,9 @@ use crate::boundary::BoundaryReport;
 use crate::bulk::band_gradient;
 use crate::geometry::P2;
 use crate::ibm::IbmBoundary;
-use crate::implicit::{band, contributions, finish, norm, Assembly, Done, Frame, Residual, Response};
+use crate::implicit::{
+    band, contributions, finish, norm, Assembly, Done, Frame, Inertia, Interval, Newmark, Residual, Response,
+};
 use crate::kinematics::{commit_point, increment_gradient};
 use crate::linalg::{self, Condition, SparseRef};
 use crate::report::{SolverReport, StepFailure, StepReport, Timings};
@@ -108,6 +110,16 @@ struct Setup<'a> {
     start_loads: crate::state::Forces,
     /// Each boundary at the start of the step, for the report.
     boundaries: Vec<BoundaryReport>,
+    /// Implicit dynamics: the step's inertia (also in the list).
+    inertia: Option<std::rc::Rc<Inertia>>,
+}
+
+/// What drives a Newton step beside the loads: nothing (quasi-static), or
+/// inertia over a time step (implicit dynamics, [`crate::newmark`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Drive {
+    QuasiStatic,
+    Dynamic { scheme: Newmark },
 }
 
 impl<'a> Setup<'a> {
@@ -115,20 +127,43 @@ impl<'a> Setup<'a> {
         sim: &'a Simulation,
         ibm_now: &'a [IbmBoundary],
         step: usize,
-        lambda0: f64,
-        lambda1: f64,
+        interval: Interval,
+        drive: Drive,
         timings: &mut Timings,
     ) -> Result<Setup<'a>, StepFailure> {
         let start = Instant::now();
-        let frame = Frame::new(sim, ibm_now, step, (lambda0, lambda1), true)?;
+        let frame = Frame::new(sim, ibm_now, step, interval, true)?;
         let mapping = start.elapsed().as_secs_f64();
         // Dead loads (body forces and point loads) at lambda; the loads at
         // the start of the step with the tractions on the curves then (for
         // the work's trapezoidal rule) and each boundary as it is then.
+        let lambda1 = interval.load.1;
         let mut start_loads = sim.dead_forces(&frame.map);
         let dead: Vec<f64> = start_loads.ext.iter().map(|f| lambda1 * f).collect();
         let boundaries = sim.add_tractions(&frame.map, step, lambda1, &mut start_loads.ext)?;
-        let list = contributions(&frame, Response::Finite, dead)?;
+        // Inertia: the grid's start velocity mapped from the points, its
+        // start acceleration that of the out-of-balance force on it.
+        let inertia = match drive {
+            Drive::QuasiStatic => None,
+            Drive::Dynamic { scheme } => {
+                let mut r0: Vec<f64> = start_loads
+                    .ext
+                    .iter()
+                    .zip(&start_loads.int)
+                    .map(|(e, i)| interval.load.0 * e - i)
+                    .collect();
+                for (n, f) in sim.state.constraint_force.iter().enumerate() {
+                    for (c, f) in f.iter().enumerate() {
+                        if let Some(i) = frame.free(n, c) {
+                            r0[i] -= f;
+                        }
+                    }
+                }
+                let previous = &sim.state.grid_acceleration;
+                Some(std::rc::Rc::new(Inertia::new(&frame, scheme, &r0, previous)?))
+            }
+        };
+        let list = contributions(&frame, Response::Finite, dead, inertia.clone())?;
         let t = Instant::now();
         let assembly = Assembly::new(&frame, list)?;
         let pattern_time = t.elapsed().as_secs_f64();
@@ -140,6 +175,7 @@ impl<'a> Setup<'a> {
             assembly,
             start_loads,
             boundaries,
+            inertia,
         })
     }
 
@@ -171,25 +207,33 @@ pub(crate) fn finite_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
     let (lambda0, lambda1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
     let policy = crate::cutback::Policy::load_step(sim);
     let whole = crate::cutback::Span::whole(lambda0, lambda1, lambda1 - lambda0);
-    crate::cutback::step(sim, &policy, whole, |sim, s| increment(sim, step, s.from, s.to, s.last))
+    crate::cutback::step(sim, &policy, whole, |sim, s| {
+        increment(
+            sim,
+            step,
+            Interval::quasi_static(s.from, s.to),
+            s.last,
+            Drive::QuasiStatic,
+        )
+    })
 }
 
-/// One increment `lambda0 -> lambda1` of load step `step`, committed with
-/// the step's number when it is the step's `last` (else the state keeps the
-/// previous step's number, at the load factor reached): each phase is a
-/// function.
-fn increment(
+/// One increment over `interval` of step `step`, driven by `drive`,
+/// committed with the step's number when it is the step's `last` (else
+/// the state keeps the previous step's number, at the load factor or time
+/// reached): each phase is a function.
+pub(crate) fn increment(
     sim: &mut Simulation,
     step: usize,
-    lambda0: f64,
-    lambda1: f64,
+    interval: Interval,
     last: bool,
+    drive: Drive,
 ) -> Result<StepReport, StepFailure> {
     let start = Instant::now();
     let mut timings = Timings::default();
     // 1. Map the points and collect every method's contribution.
     let ibm_now = sim.ibm_boundaries_now(step)?;
-    let setup = Setup::new(sim, &ibm_now, step, lambda0, lambda1, &mut timings)?;
+    let setup = Setup::new(sim, &ibm_now, step, interval, drive, &mut timings)?;
     // 2. Newton on the nodal unknowns.
     let mut solved = newton(&setup, &mut timings)?;
     // 3. Condition numbers of the last tangent (of the step's last increment).
@@ -208,10 +252,25 @@ fn increment(
     let updated = update(&setup, &solved)?;
     timings.update = t.elapsed().as_secs_f64();
     // 5. Commit and report.
+    let motion = setup.frame.motion(&solved.d);
+    let mut points = updated.points;
+    let dynamic = match &setup.inertia {
+        Some(i) => {
+            let constraint = setup.assembly.force_of("band", &setup.frame, &solved.d, &solved.res.it);
+            Some(crate::newmark::GridMotion::commit(
+                i,
+                &setup.frame,
+                &motion,
+                constraint,
+                &mut points,
+            ))
+        }
+        None => None,
+    };
     let done = Done {
-        points: updated.points,
+        points,
         committed_step: if last { step } else { step - 1 },
-        motion: setup.frame.motion(&solved.d),
+        motion,
         strain_energy: updated.strain_energy,
         dissipation: updated.dissipation,
         work: updated.work,
@@ -228,7 +287,13 @@ fn increment(
             substeps: 1,
         },
     };
-    Ok(finish(sim, setup.frame.close(), done, timings, start))
+    let closed = setup.frame.close();
+    drop(ibm_now);
+    let report = finish(sim, closed, done, timings, start);
+    Ok(match dynamic {
+        Some(moved) => crate::newmark::report(sim, report, moved),
+        None => report,
+    })
 }
 
 /// A converged Newton solve.
@@ -462,10 +527,18 @@ fn update(setup: &Setup, solved: &Solved) -> Result<Updated, StepFailure> {
             }
         }
     }
-    // The implicit boundaries' reactions and their work.
+    // The implicit boundaries' reactions and their work; in dynamics the
+    // reactions hold the inertial force too (at the start `M a_n`).
     let ibm = match &frame.ibm {
         Some(s) => {
-            let (reports, w) = band::finite_reports(frame, s, it, &res.fext, &forces.ext, d)?;
+            let (fext, start_ext) = match &setup.inertia {
+                Some(i) => (
+                    i.less_inertia(frame, &res.fext, Some(&total)),
+                    i.less_inertia(frame, &forces.ext, None),
+                ),
+                None => (res.fext.clone(), forces.ext.clone()),
+            };
+            let (reports, w) = band::finite_reports(frame, s, it, &fext, &start_ext, d)?;
             work += w;
             reports
         }
@@ -492,7 +565,11 @@ pub(crate) fn tangent_check(sim: &Simulation, amplitude: f64) -> Result<f64, Ste
     let steps = sim.load_steps();
     let ibm_now = sim.ibm_boundaries_now(step)?;
     let (l0, l1) = ((step - 1) as f64 / steps as f64, step as f64 / steps as f64);
-    let setup = Setup::new(sim, &ibm_now, step, l0, l1, &mut Timings::default())?;
+    let (interval, drive) = match sim.model.analysis.kind {
+        crate::scene::AnalysisKind::DynamicImplicit => crate::newmark::next_step(sim),
+        _ => (Interval::quasi_static(l0, l1), Drive::QuasiStatic),
+    };
+    let setup = Setup::new(sim, &ibm_now, step, interval, drive, &mut Timings::default())?;
     let map = &setup.frame.map;
     let mut rand = crate::linalg::XorShift::new(0x9e37_79b9_7f4a_7c15);
     let h = sim.model.grid.h;

@@ -403,7 +403,7 @@ fn fmt_residuals(r: &[f64]) -> String {
 
 impl std::error::Error for StepFailure {}
 
-/// What an explicit step adds to its [`StepReport`].
+/// What a dynamic step (explicit or implicit) adds to its [`StepReport`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct DynamicsReport {
     /// Time at the end of the step (s).
@@ -437,6 +437,9 @@ pub struct DynamicsReport {
     pub cutbacks: Vec<Cutback>,
     /// Sub-steps that made up the step (1 without cutbacks).
     pub substeps: usize,
+    /// Implicit dynamics: its time integrator (`None`: explicit, central
+    /// differences; its `stress_update` then applies).
+    pub integrator: Option<crate::scene::Integrator>,
 }
 
 /// Condition numbers of the three mass matrices at one configuration, and

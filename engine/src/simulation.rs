@@ -51,6 +51,7 @@ impl Simulation {
             crate::scene::AnalysisKind::QuasiStaticLinear => crate::linear::linear_step(self),
             crate::scene::AnalysisKind::QuasiStaticFinite => crate::newton::finite_step(self),
             crate::scene::AnalysisKind::ExplicitDynamics => crate::dynamics::explicit_step(self),
+            crate::scene::AnalysisKind::DynamicImplicit => crate::newmark::dynamic_step(self),
         }?;
         report.probes = self.probe_values(Some(&report));
         Ok(report)

@@ -54,6 +54,19 @@ pub(crate) struct State {
     /// none), which the next step starts with ([`crate::ghost::step_work`]).
     #[serde(default)]
     pub(crate) ghost_force: Vec<P2>,
+    /// Implicit dynamics: the implicit boundaries' force on the grid
+    /// nodes at the end of the last step (N per unit thickness, per grid
+    /// node; empty: none), which the next step's start acceleration
+    /// balances ([`crate::implicit::Inertia::new`]); absent from older
+    /// checkpoints.
+    #[serde(default)]
+    pub(crate) constraint_force: Vec<P2>,
+    /// Implicit dynamics with Bossak's alpha: the grid's acceleration
+    /// `a_n` at the start of the last step (per grid node; empty at the
+    /// run's start), from which the next step's follows
+    /// ([`crate::implicit::Inertia::new`]).
+    #[serde(default)]
+    pub(crate) grid_acceleration: Vec<P2>,
     /// How far each moving implicit boundary has moved.
     pub(crate) ibm_offsets: Vec<P2>,
     /// Explicit dynamics: kinetic plus strain energy at the start (J).
@@ -103,6 +116,11 @@ pub(crate) fn tracked(kind: AnalysisKind) -> Tracked {
             finite: true,
             velocity: true,
         },
+        AnalysisKind::DynamicImplicit => Tracked {
+            strain: false,
+            finite: true,
+            velocity: true,
+        },
     }
 }
 
@@ -131,6 +149,8 @@ impl Simulation {
             strain_energy: 0.0,
             ghost_energy: 0.0,
             ghost_force: Vec::new(),
+            constraint_force: Vec::new(),
+            grid_acceleration: Vec::new(),
             active_cells,
             ghost_faces: Vec::new(),
             iterations: 0,
@@ -209,10 +229,12 @@ impl Simulation {
         }
     }
 
-    /// Simulated time (s) after the steps taken, for explicit dynamics.
+    /// Simulated time (s) after the steps taken, for dynamics (explicit or
+    /// implicit).
     pub fn time(&self) -> Option<f64> {
         let a = &self.model.analysis;
-        (a.kind == crate::scene::AnalysisKind::ExplicitDynamics)
+        a.kind
+            .is_dynamic()
             .then(|| self.state.step as f64 * a.duration.unwrap_or(0.0) / a.load_steps as f64)
     }
 

@@ -61,10 +61,13 @@ fn print_totals(sim: &Simulation, table: &Table, r: &StepReport, u: Units) {
         },
         r.condition.map_or(String::new(), |c| format!(
             ", {} {:.3e} ({})",
-            // Explicit dynamics conditions the mass it solves with.
-            r.dynamics
-                .as_ref()
-                .map_or("cond(K)".to_string(), |d| format!("cond(M {})", d.mass.label())),
+            // Explicit dynamics conditions the mass it solves with,
+            // implicit dynamics its tangent K + M / (beta dt^2).
+            match &r.dynamics {
+                Some(d) if d.integrator.is_none() => format!("cond(M {})", d.mass.label()),
+                Some(_) => "cond(K + M/(beta dt^2))".to_string(),
+                None => "cond(K)".to_string(),
+            },
             c.value,
             c.method.label()
         )),

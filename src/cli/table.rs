@@ -33,7 +33,7 @@ fn probe_cells(r: &StepReport) -> String {
         .collect()
 }
 
-/// Header of the explicit-dynamics table (see [`dynamics_row`]).
+/// Header of the dynamics table (see [`dynamics_row`]).
 pub fn dynamics_header(first: &StepReport) -> String {
     let mut h = format!(
         "{:>6} {:>9} {:>8} {:>11} {:>11} {:>11} {:>11} {:>10} {:>10} {:>10} {:>10}",
@@ -49,6 +49,9 @@ pub fn dynamics_header(first: &StepReport) -> String {
         "cond Mlump",
         "CFL s/m"
     );
+    if first.dynamics.as_ref().is_some_and(|d| d.integrator.is_some()) {
+        h.push_str(&format!(" {:>5} {:>10}", "iters", "cond(K)"));
+    }
     for e in &first.errors {
         h.push_str(&format!(" {:>16}", e.name));
     }
@@ -57,9 +60,10 @@ pub fn dynamics_header(first: &StepReport) -> String {
     h
 }
 
-/// One explicit step: energies, the balance error over the initial energy,
+/// One dynamic step: energies, the balance error over the initial energy,
 /// and (on condition steps) the mass condition numbers and the CFL number
-/// of the mass in use.
+/// of the mass in use; implicit dynamics adds its Newton iterations and
+/// the tangent's condition number.
 pub fn dynamics_row(r: &StepReport) -> String {
     let d = r.dynamics.as_ref().expect("a dynamics report");
     let e = &r.energy;
@@ -85,6 +89,9 @@ pub fn dynamics_row(r: &StepReport) -> String {
         c(cond.map(|c| c.mass_lumped.value)),
         c(cfl)
     );
+    if d.integrator.is_some() {
+        s.push_str(&format!(" {:>5} {:>10}", r.iterations, c(r.condition.map(|c| c.value))));
+    }
     for e in &r.errors {
         s.push_str(&format!(" {:>16.4e}", e.value));
     }

@@ -36,9 +36,9 @@
 //! | `metrics/probe/<name>/{ux,uy,sxx,syy,sxy,fx,fy}` | Scalars (the scene's `[[probe]]`s, [`crate::probe`]) | every step |
 //! | `metrics/time/<phase>` | Scalars (s) | every step |
 //! | `metrics/unknowns` | Scalars | every step |
-//! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (explicit dynamics, balance `W_kin + W_eps + W_p - W_ext - W_0`; also on `time`) | every step |
-//! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (explicit dynamics) | every step |
-//! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (explicit dynamics) | every `condition_every` steps |
+//! | `metrics/energy/{kinetic,kinetic_grid,total,balance_error,balance_error_relative}` | Scalars (dynamics, balance `W_kin + W_eps + W_p - W_ext - W_0`; also on `time`) | every step |
+//! | `metrics/momentum/{x,y}`, `metrics/dynamics/max_grid_speed` | Scalars (dynamics) | every step |
+//! | `metrics/condition/mass_{consistent,stabilised,lumped}`, `metrics/cfl/{consistent,stabilised,lumped}` | Scalars (dynamics) | every `condition_every` steps |
 //! | `events` | TextLog (start, parameter changes, failures, end), each on the `step` it belongs to and numbered on the `event` timeline (several at one step stay apart) | as they happen |
 //!
 //! "Frames" are the steps the cadence picks ([`crate::model::record`]:
@@ -441,13 +441,13 @@ pub fn recording_name(scene: &str, path: &Path) -> String {
 
 /// What the run will record, from its model: it decides the layout.
 fn contents(sim: &Simulation, colour: Field) -> Contents {
-    use crate::scene::{AnalysisKind, ConditionMode, MassKind};
+    use crate::scene::{ConditionMode, MassKind};
     let m = sim.model();
     let a = &m.analysis;
-    let dynamic = a.kind == AnalysisKind::ExplicitDynamics;
+    let dynamic = a.kind.is_dynamic();
     Contents {
         dynamic,
-        newton: a.kind == AnalysisKind::QuasiStaticFinite,
+        newton: a.kind.is_newton(),
         condition: a.condition != ConditionMode::Off && (!dynamic || a.condition_every > 0),
         ghost: if dynamic {
             a.mass == MassKind::Stabilised
@@ -865,13 +865,17 @@ impl Recorder {
         self.log_residuals(report.step, &report.residuals)?;
         self.rec.set_time_sequence("step", report.step as i64);
         self.step_now.set(report.step as i64);
+        // A step's condition numbers are its tangent's, but for explicit
+        // dynamics, whose are its masses' (logged with the dynamics).
+        let tangent = report.dynamics.as_ref().is_none_or(|d| d.integrator.is_some());
         if let Some(d) = &report.dynamics {
             self.log_dynamics(report, d)?;
-        } else if let Some(c) = &report.condition {
+        }
+        if let (true, Some(c)) = (tangent, &report.condition) {
             self.scalar("metrics/condition/stiffness", c.value)?;
             self.scalar("metrics/log10/condition/stiffness", c.value.log10())?;
         }
-        if let (None, Some(c)) = (&report.dynamics, &report.condition_unstabilised) {
+        if let (true, Some(c)) = (tangent, &report.condition_unstabilised) {
             self.scalar("metrics/condition/stiffness_unstabilised", c.value)?;
             self.scalar("metrics/log10/condition/stiffness_unstabilised", c.value.log10())?;
         }
@@ -880,8 +884,10 @@ impl Recorder {
         self.scalar("metrics/energy/plastic_dissipation", report.energy.plastic_dissipation)?;
         self.scalar("metrics/energy/strain", report.energy.strain)?;
         self.scalar("metrics/energy/external_work", report.energy.external_work)?;
-        if report.dynamics.is_none() {
+        if tangent {
             self.scalar("metrics/energy/ghost", report.energy.ghost)?;
+        }
+        if report.dynamics.is_none() {
             // The quasi-static balance, the dynamic one without kinetic
             // energy: stored and dissipated against the work done (0 up to
             // the trapezoidal rule of the work along the load path).
@@ -996,7 +1002,7 @@ impl Recorder {
         }
     }
 
-    /// Explicit dynamics: energies, balance, momentum and (on condition
+    /// Dynamics: energies, balance, momentum and (on condition
     /// steps) mass conditioning and CFL numbers, on `step` and `time`.
     fn log_dynamics(&self, report: &StepReport, d: &crate::dynamics::DynamicsReport) -> Result<(), RecordError> {
         self.rec.set_duration_secs("time", d.time);

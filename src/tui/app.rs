@@ -11,7 +11,7 @@ pub struct View {
     pub step: usize,
     pub load_steps: usize,
     pub load_factor: f64,
-    /// Simulated time (s), explicit dynamics only.
+    /// Simulated time (s), dynamics only.
     pub time: Option<f64>,
     pub positions: Vec<[f64; 2]>,
     /// The colour field at every point.
@@ -336,7 +336,7 @@ impl App {
             status: String::new(),
             quit: false,
             running: false,
-            default_gamma_m: 0.25 * sim.model().materials.iter().map(|m| m.density()).fold(0.0, f64::max),
+            default_gamma_m: sim.model().default_gamma_m(),
             zoom: 1.0,
             pan: [0.0; 2],
             chart: if sim.time().is_some() {

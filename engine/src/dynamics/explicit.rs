@@ -556,6 +556,7 @@ fn report(
             velocity_update: plan.velocity_update,
             pattern_reused: grid.pattern_reused,
             conditioning,
+            integrator: None,
             cutbacks: Vec::new(),
             substeps: 1,
         }),

@@ -326,6 +326,49 @@ fn map_velocities(map: &Mapping, mass: &MassSolver, masses: &[f64], velocities: 
     mass.solve(&gather(map, &momentum))
 }
 
+/// A step's mass on the free dofs of its mapping, factorised: what maps
+/// the points' velocities and accelerations to the grid at the start of
+/// an implicit dynamic step (G (10)), and solves for the initial
+/// acceleration.
+pub(crate) struct GridMass(MassSolver);
+
+impl GridMass {
+    /// The mass `kind` of the points mapped by `map` (lumped, consistent,
+    /// or stabilised with `gamma_m J_G` on `faces`), factorised within
+    /// `budget` bytes.
+    pub(crate) fn new(
+        sim: &Simulation,
+        map: &Mapping,
+        faces: &[GhostFace],
+        kind: MassKind,
+        gamma_m: f64,
+        budget: u64,
+    ) -> Result<GridMass, linalg::FactorError> {
+        if kind == MassKind::Lumped {
+            return Ok(GridMass(MassSolver::Lumped(lumped_mass(map, &sim.state.points.mass))));
+        }
+        let faces = if kind == MassKind::Stabilised { faces } else { &[] };
+        let blocks = blocks_of(map, faces);
+        let parts = scalar_parts(&map.dofs);
+        let points = PointsOnGrid::of(sim);
+        let analyses = analyse_parts(map, &parts, &blocks, faces, &points)?;
+        let parts = factorise_parts(map, parts, &analyses, &blocks, faces, &points, gamma_m, budget)?;
+        Ok(GridMass(MassSolver::Consistent(parts)))
+    }
+
+    /// `M x = sum_p m_p S_p^T f_p` for the point field `field` (per
+    /// point): `x` per grid node, zero where a component is held or
+    /// inactive.
+    pub(crate) fn map_points(&self, map: &Mapping, masses: &[f64], field: &[P2]) -> Vec<P2> {
+        scatter(map, &map_velocities(map, &self.0, masses, field))
+    }
+
+    /// `M x = b` for `b` on the free dofs: `x` per grid node.
+    pub(crate) fn solve(&self, map: &Mapping, b: &[f64]) -> Vec<P2> {
+        scatter(map, &self.0.solve(b))
+    }
+}
+
 /// Factorise the consistent or stabilised mass of this step (reusing the
 /// cached pattern when the blocks are unchanged). Returns the solver and
 /// whether the cache was hit.

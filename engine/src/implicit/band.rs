@@ -199,7 +199,7 @@ pub(crate) fn finite_reports(
     d: &[P2],
 ) -> Result<(Vec<IbmReport>, f64), StepFailure> {
     let (sim, map, step) = (frame.sim, &frame.map, frame.step);
-    let (lambda0, lambda1) = (frame.lambda0, frame.lambda1);
+    let lambda0 = frame.lambda0;
     // Out-of-balance of the points at the start (zero increment) and
     // the end of the step: the implicit boundaries' reactions.
     let zero = vec![[0.0; 2]; d.len()];
@@ -229,7 +229,7 @@ pub(crate) fn finite_reports(
         &r1,
         d,
         sim.model.exact.as_ref(),
-        lambda1 - lambda0,
+        frame.path.1 - frame.path.0,
     );
     Ok((reports, w))
 }

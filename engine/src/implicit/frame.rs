@@ -10,6 +10,30 @@ use crate::ibm::{GradOp, IbmBoundary, IbmStep};
 use crate::report::StepFailure;
 use crate::state::Simulation;
 
+/// The interval an implicit step covers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Interval {
+    /// Load factor at its start and end: the loads are `lambda f`.
+    pub load: (f64, f64),
+    /// The run's progress at its start and end, in `[0, 1]`: prescribed
+    /// motions (grid supports, implicit boundaries) move by their totals
+    /// times its increment, and exact solutions and the report read its
+    /// end. The load factor in a quasi-static step; `t / duration` in
+    /// implicit dynamics, whose loads act in full from the start.
+    pub path: (f64, f64),
+}
+
+impl Interval {
+    /// A quasi-static increment `lambda0 -> lambda1`: loads and prescribed
+    /// motions in proportion.
+    pub fn quasi_static(lambda0: f64, lambda1: f64) -> Interval {
+        Interval {
+            load: (lambda0, lambda1),
+            path: (lambda0, lambda1),
+        }
+    }
+}
+
 /// What an implicit step keeps fixed from its start to its commit.
 pub(crate) struct Frame<'s> {
     pub sim: &'s Simulation,
@@ -18,6 +42,8 @@ pub(crate) struct Frame<'s> {
     /// Load factor at the start and the end of the increment.
     pub lambda0: f64,
     pub lambda1: f64,
+    /// The run's progress over the increment ([`Interval::path`]).
+    pub path: (f64, f64),
     /// The points on the grid: stencils, point groups, dofs (the grid
     /// supports' increments net of `d^a`).
     pub map: Mapping,
@@ -35,20 +61,21 @@ pub(crate) struct Frame<'s> {
 
 impl<'s> Frame<'s> {
     /// Map the points of `sim` to the grid and prepare the implicit
-    /// boundaries `ibm_now` (their `d^a` for the increment `lambda0 ->
-    /// lambda1`) and the ghost faces; with `finite`, the band operators of
-    /// the finite-deformation step.
+    /// boundaries `ibm_now` (their `d^a` over the `interval`'s path) and
+    /// the ghost faces; with `finite`, the band operators of the
+    /// finite-deformation step.
     pub fn new(
         sim: &'s Simulation,
         ibm_now: &'s [IbmBoundary],
         step: usize,
-        (lambda0, lambda1): (f64, f64),
+        interval: Interval,
         finite: bool,
     ) -> Result<Frame<'s>, StepFailure> {
         let model = &sim.model;
         let (grid, pts) = (&model.grid, &sim.state.points);
-        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, lambda1 - lambda0)
-            .map_err(|e| e.at_step(step))?;
+        let ((lambda0, lambda1), path) = (interval.load, interval.path);
+        let moved = path.1 - path.0;
+        let mut map = Mapping::build(grid, pts, &model.bodies, &model.dirichlet, moved).map_err(|e| e.at_step(step))?;
         let gamma = sim.params.gamma_k;
         let faces = if gamma > 0.0 {
             ghost::faces_of(grid, &map, model.analysis.ghost_cells)
@@ -63,7 +90,7 @@ impl<'s> Frame<'s> {
                 grid,
                 &pts.x,
                 sim.params.delta_over_h,
-                lambda1 - lambda0,
+                moved,
                 model.exact.as_ref(),
             )
             .map_err(|e| StepFailure::Singular {
@@ -93,6 +120,7 @@ impl<'s> Frame<'s> {
             step,
             lambda0,
             lambda1,
+            path,
             map,
             ibm,
             ops,
@@ -147,7 +175,7 @@ impl<'s> Frame<'s> {
     pub fn close(self) -> Closed {
         Closed {
             step: self.step,
-            lambda: (self.lambda0, self.lambda1),
+            path: self.path,
             unknowns: self.map.dofs.n_free,
             active_nodes: self.map.dofs.active_nodes,
             active_cells: self.map.active_cells,
@@ -169,7 +197,8 @@ impl<'s> Frame<'s> {
 /// What a step's commit needs of its [`Frame`].
 pub(crate) struct Closed {
     pub step: usize,
-    pub lambda: (f64, f64),
+    /// The run's progress over the step ([`Interval::path`]).
+    pub path: (f64, f64),
     pub unknowns: usize,
     pub active_nodes: usize,
     pub active_cells: Vec<usize>,

@@ -17,13 +17,15 @@ pub(crate) mod band;
 mod contribution;
 mod frame;
 mod ghost;
+mod inertia;
 mod loads;
 mod points;
 mod traction;
 
 pub(crate) use crate::linalg::norm;
 pub(crate) use contribution::{At, Contribution};
-pub(crate) use frame::{Closed, Frame};
+pub(crate) use frame::{Closed, Frame, Interval};
+pub(crate) use inertia::{Inertia, Newmark};
 
 use crate::assembly::{Pattern, Storage};
 use crate::boundary::BoundaryReport;
@@ -163,6 +165,25 @@ impl Assembly {
         })
     }
 
+    /// The force of the contributions named `name` at unknowns `d` with
+    /// the points' response `it` (free dofs): what they subtract from the
+    /// residual.
+    pub fn force_of(&self, name: &str, frame: &Frame, d: &[P2], it: &Iterate) -> Vec<f64> {
+        let motion = frame.motion(d);
+        let at = At {
+            frame,
+            d,
+            motion: &motion,
+            points: Some(it),
+            stabilised: true,
+        };
+        let mut r = vec![0.0; frame.map.dofs.n_free];
+        for c in self.list.iter().filter(|c| c.name() == name) {
+            c.internal(&at, &mut r);
+        }
+        r.iter().map(|v| -v).collect()
+    }
+
     /// The tangent of the residual at `d` (its negative derivative), with
     /// or without the stabilisation terms: its values over the pattern.
     pub fn tangent(&self, frame: &Frame, res: &Residual, d: &[P2], stabilised: bool) -> Result<Vec<f64>, StepFailure> {
@@ -191,14 +212,16 @@ pub(crate) enum Response {
 
 /// Every method's contribution to an implicit step, in the one order of
 /// the list: the material points, the ghost penalty (G (27)), the
-/// implicit boundaries' band (C (18)-(27)), and under finite deformation
+/// implicit boundaries' band (C (18)-(27)), under finite deformation
 /// the dead loads (`dead`: body forces and point loads at the step's load
-/// factor) and each B-spline boundary's traction with its load stiffness.
+/// factor) and each B-spline boundary's traction with its load stiffness,
+/// and in implicit dynamics the inertia (`inertia`, Newmark).
 /// A new method adds its contribution here.
 pub(crate) fn contributions(
     frame: &Frame,
     response: Response,
     dead: Vec<f64>,
+    inertia: Option<std::rc::Rc<Inertia>>,
 ) -> Result<Vec<Box<dyn Contribution>>, StepFailure> {
     let mut list: Vec<Box<dyn Contribution>> = match response {
         Response::Linear => vec![Box::new(points::SmallStrainPoints)],
@@ -213,6 +236,9 @@ pub(crate) fn contributions(
         for load in traction::TractionLoad::all_of(frame)? {
             list.push(Box::new(load));
         }
+    }
+    if let Some(inertia) = inertia {
+        list.push(Box::new(inertia));
     }
     Ok(list)
 }
@@ -252,7 +278,7 @@ pub(crate) fn finish(
     mut timings: Timings,
     start: std::time::Instant,
 ) -> StepReport {
-    let (step, (lambda0, lambda1)) = (frame.step, frame.lambda);
+    let (step, (path0, path1)) = (frame.step, frame.path);
     let faces = frame.faces;
     let active_cells = frame.active_cells.len();
     // The penalty's force and work on the nodes' whole motion d + d^a.
@@ -268,9 +294,9 @@ pub(crate) fn finish(
         frame.active_cells,
         &faces,
         done.iterations,
-        lambda1 - lambda0,
+        path1 - path0,
     );
-    let errors = sim.exact_errors(lambda1);
+    let errors = sim.exact_errors(path1);
     timings.total = start.elapsed().as_secs_f64();
     StepReport {
         unknowns: frame.unknowns,
@@ -295,6 +321,6 @@ pub(crate) fn finish(
         max_increment,
         boundaries: done.boundaries,
         solver: Some(done.solver),
-        ..StepReport::new(step, sim.load_steps(), lambda1)
+        ..StepReport::new(step, sim.load_steps(), path1)
     }
 }

@@ -25,10 +25,10 @@ pub(super) fn validate_solver(a: &AnalysisSpec) -> Result<(), FieldError> {
     if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
         return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
     }
-    if a.fbar && a.kind != crate::scene::AnalysisKind::QuasiStaticFinite {
+    if a.fbar && !a.kind.is_newton() {
         return Err(FieldError::new(
             "analysis.fbar",
-            "F-bar modifies the finite-deformation (Newton) path only: kind = \"quasi-static-finite\"",
+            "F-bar modifies the finite-deformation (Newton) path only: kind = \"quasi-static-finite\" or \"dynamic-implicit\"",
         ));
     }
     if a.dense_limit > MAX_DENSE_LIMIT {
@@ -43,51 +43,66 @@ pub(super) fn validate_solver(a: &AnalysisSpec) -> Result<(), FieldError> {
     Ok(())
 }
 
-/// What the analysis kind needs of the rest of the scene: explicit
-/// dynamics its settings ([`validate_explicit`]), a density in every
-/// material and at most the free-motion exact solution; the other kinds
-/// no `duration`.
+/// What the analysis kind needs of the rest of the scene: dynamics
+/// (explicit or implicit) its settings ([`validate_dynamic`]), a density
+/// in every material and at most the free-motion exact solution; the
+/// other kinds no `duration`.
 pub(super) fn validate_kind(
     scene: &Scene,
     dirichlet: &[GridDirichlet],
     materials: &[Material],
 ) -> Result<(), FieldError> {
     let a = &scene.analysis;
-    if a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
-        validate_explicit(a, dirichlet)?;
-        // Explicit dynamics divides by mass: every material needs density.
+    if a.kind.is_dynamic() {
+        validate_dynamic(a, dirichlet)?;
+        // Dynamics divides by mass: every material needs density.
         if let Some(k) = materials.iter().position(|m| !(m.density() > 0.0)) {
             return Err(FieldError::new(
                 format!("material[{k}].density"),
-                "explicit dynamics needs a positive density",
+                "dynamics needs a positive density",
             ));
         }
-        // Static exact solutions grow with the load factor; explicit
+        // Static exact solutions grow with the load factor; dynamic
         // loads act in full from the start, so only free motion applies.
         if matches!(scene.exact, Some(ref e) if !matches!(e, ExactSpec::FreeMotion {})) {
             return Err(FieldError::new(
                 "exact.name",
-                "explicit dynamics supports the free-motion exact solution only",
+                "dynamics supports the free-motion exact solution only",
             ));
         }
     } else if a.duration.is_some() {
         return Err(FieldError::new(
             "analysis.duration",
-            "only for kind = \"explicit-dynamics\"",
+            "only for kind = \"explicit-dynamics\" or \"dynamic-implicit\"",
         ));
     }
     Ok(())
 }
 
-/// Settings an explicit-dynamics analysis needs.
-fn validate_explicit(a: &AnalysisSpec, dirichlet: &[GridDirichlet]) -> Result<(), FieldError> {
+/// Settings a dynamic analysis needs: its duration, the ghost mass
+/// penalty, the blow-up factor, supports that hold (moving grid supports
+/// are not time-dependent conditions: an implicit boundary moves, in
+/// implicit dynamics), and implicit dynamics' integrator.
+fn validate_dynamic(a: &AnalysisSpec, dirichlet: &[GridDirichlet]) -> Result<(), FieldError> {
+    if a.kind == crate::scene::AnalysisKind::DynamicImplicit
+        && a.integrator == crate::scene::Integrator::Bossak
+        && !(-1.0 / 3.0..=0.0).contains(&a.bossak_alpha)
+    {
+        return Err(FieldError::new(
+            "analysis.bossak_alpha",
+            format!(
+                "must lie in [-1/3, 0] (second order and unconditionally stable there), got {}",
+                a.bossak_alpha
+            ),
+        ));
+    }
     match a.duration {
         Some(d) if d > 0.0 && d.is_finite() => {}
         Some(_) => return Err(FieldError::new("analysis.duration", "must be positive")),
         None => {
             return Err(FieldError::new(
                 "analysis.duration",
-                "explicit dynamics needs the simulated time `duration` (s)",
+                "dynamics needs the simulated time `duration` (s)",
             ))
         }
     }
@@ -102,7 +117,8 @@ fn validate_explicit(a: &AnalysisSpec, dirichlet: &[GridDirichlet]) -> Result<()
     if dirichlet.iter().any(|d| d.value.iter().flatten().any(|v| *v != 0.0)) {
         return Err(FieldError::new(
             "dirichlet",
-            "explicit dynamics supports fixed and roller supports only (zero values)",
+            "dynamics supports fixed and roller grid supports only (zero values); a prescribed motion is an \
+             implicit boundary's `displacement` under kind = \"dynamic-implicit\"",
         ));
     }
     Ok(())

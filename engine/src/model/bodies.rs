@@ -78,11 +78,25 @@ pub(super) fn build(
                 "the body is empty: no cell overlaps its region",
             ));
         }
-        let moving = b.velocity != [0.0; 2] || b.velocity_gradient.is_some();
-        if moving && scene.analysis.kind != crate::scene::AnalysisKind::ExplicitDynamics {
+        if let Some(m) = &b.velocity_mode {
+            let finite = m
+                .amplitude
+                .iter()
+                .chain(&m.origin)
+                .chain(&m.axis)
+                .all(|v| v.is_finite());
+            if !(finite && m.length > 0.0 && m.length.is_finite()) || m.axis[0].hypot(m.axis[1]) == 0.0 {
+                return Err(FieldError::new(
+                    f("velocity_mode"),
+                    "needs finite amplitude and origin, a non-zero axis and a positive length",
+                ));
+            }
+        }
+        let moving = b.velocity != [0.0; 2] || b.velocity_gradient.is_some() || b.velocity_mode.is_some();
+        if moving && !scene.analysis.kind.is_dynamic() {
             return Err(FieldError::new(
                 f("velocity"),
-                "initial velocities need kind = \"explicit-dynamics\"",
+                "initial velocities need kind = \"explicit-dynamics\" or \"dynamic-implicit\"",
             ));
         }
         let l = b.velocity_gradient.unwrap_or([[0.0; 2]; 2]);
@@ -98,9 +112,10 @@ pub(super) fn build(
         let c = b.velocity_centre;
         for p in before..points.len() {
             let d = [points.x[p][0] - c[0], points.x[p][1] - c[1]];
+            let mode = b.velocity_mode.as_ref().map_or([0.0; 2], |m| m.at(points.x[p]));
             points.v[p] = [
-                b.velocity[0] + l[0][0] * d[0] + l[0][1] * d[1],
-                b.velocity[1] + l[1][0] * d[0] + l[1][1] * d[1],
+                b.velocity[0] + l[0][0] * d[0] + l[0][1] * d[1] + mode[0],
+                b.velocity[1] + l[1][0] * d[0] + l[1][1] * d[1] + mode[1],
             ];
         }
         if b.basis == BasisKind::Gimp {

@@ -22,11 +22,11 @@ pub(super) fn build_exact_solution(
 /// bodies when the field has a gradient.
 fn free_motion(scene: &Scene, materials: &[Material], bodies: &[Body]) -> Result<ExactSolution, FieldError> {
     let duration = match (scene.analysis.kind, scene.analysis.duration) {
-        (crate::scene::AnalysisKind::ExplicitDynamics, Some(d)) => d,
+        (kind, Some(d)) if kind.is_dynamic() => d,
         _ => {
             return Err(FieldError::new(
                 "exact.name",
-                "free-motion needs kind = \"explicit-dynamics\" with a duration",
+                "free-motion needs kind = \"explicit-dynamics\" or \"dynamic-implicit\" with a duration",
             ))
         }
     };
@@ -34,6 +34,12 @@ fn free_motion(scene: &Scene, materials: &[Material], bodies: &[Body]) -> Result
         .iter()
         .zip(&scene.bodies)
         .any(|(b, spec)| materials[b.material].elastic.e != 0.0 && spec.velocity_gradient.is_some());
+    if scene.bodies.iter().any(|b| b.velocity_mode.is_some()) {
+        return Err(FieldError::new(
+            "exact.name",
+            "free motion keeps each point's initial velocity: a vibration mode (velocity_mode) does not",
+        ));
+    }
     if strained {
         return Err(FieldError::new(
             "exact.name",

@@ -23,7 +23,8 @@ pub(super) fn build(
             return Err(FieldError::new(
                 f("kind"),
                 "the implicit boundary method (Cortis et al. 2018) acts through the stiffness of an implicit \
-                 solve; explicit dynamics has none: use a quasi-static analysis or grid-line supports",
+                 solve; explicit dynamics has none: use kind = \"dynamic-implicit\" (Newmark, the same \
+                 boundaries), a quasi-static analysis or grid-line supports",
             ));
         }
         let (poly, spline) = polyline(k, spec, boundaries, points)?;

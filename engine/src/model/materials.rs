@@ -28,7 +28,7 @@ pub(super) fn build(scene: &Scene) -> Result<Vec<Material>, FieldError> {
                 if !finite_kind {
                     return Err(FieldError::new(
                         f("model"),
-                        "von Mises plasticity needs kind = \"quasi-static-finite\" or \"explicit-dynamics\"",
+                        "von Mises plasticity needs kind = \"quasi-static-finite\", \"explicit-dynamics\" or \"dynamic-implicit\"",
                     ));
                 }
                 match m.yield_stress {
@@ -48,15 +48,15 @@ pub(super) fn build(scene: &Scene) -> Result<Vec<Material>, FieldError> {
                 "the finite-deformation and explicit analyses are plane strain",
             ));
         }
-        // Explicit dynamics needs no stiffness matrix: E = 0 is a
-        // stress-free material (G 5.1.2's stretching ghost).
-        let explicit = scene.analysis.kind == crate::scene::AnalysisKind::ExplicitDynamics;
-        if !((m.e > 0.0 || (explicit && m.e == 0.0)) && m.e.is_finite()) {
+        // Dynamics has the mass to carry a step: E = 0 is a stress-free
+        // material (G 5.1.2's stretching ghost).
+        let dynamic = scene.analysis.kind.is_dynamic();
+        if !((m.e > 0.0 || (dynamic && m.e == 0.0)) && m.e.is_finite()) {
             return Err(FieldError::new(
                 f("E"),
                 format!(
                     "Young's modulus must be positive{}, got {}",
-                    if explicit { " or zero" } else { "" },
+                    if dynamic { " or zero" } else { "" },
                     number(m.e)
                 ),
             ));

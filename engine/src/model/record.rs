@@ -87,9 +87,10 @@ pub fn check_cadence(c: Cadence, kind: AnalysisKind) -> Result<(), (&'static str
         }
         Cadence::Every(_) => Ok(()),
         Cadence::Dt(t) if !(t > 0.0 && t.is_finite()) => Err(("dt", "must be a positive time (s)".into())),
-        Cadence::Dt(_) if kind != AnalysisKind::ExplicitDynamics => Err((
+        Cadence::Dt(_) if !kind.is_dynamic() => Err((
             "dt",
-            "a cadence in simulated time is for kind = \"explicit-dynamics\"; use `every` (steps)".into(),
+            "a cadence in simulated time is for kind = \"explicit-dynamics\" or \"dynamic-implicit\"; use `every` (steps)"
+                .into(),
         )),
         Cadence::Dt(_) => Ok(()),
     }

@@ -214,15 +214,46 @@ pub struct BodySpec {
     /// Polar placement only: points along the circumference.
     #[serde(default)]
     pub circumferential_points: Option<usize>,
-    /// Explicit dynamics: initial velocity (m/s) ...
+    /// Dynamics: initial velocity (m/s) ...
     #[serde(default)]
     pub velocity: [f64; 2],
     /// ... plus `L (x - velocity_centre)` with this velocity gradient `L`
-    /// (1/s, rows `[[dvx/dx, dvx/dy], [dvy/dx, dvy/dy]]`).
+    /// (1/s, rows `[[dvx/dx, dvx/dy], [dvy/dx, dvy/dy]]`) ...
     #[serde(default)]
     pub velocity_gradient: Option<[[f64; 2]; 2]>,
     #[serde(default)]
     pub velocity_centre: [f64; 2],
+    /// ... plus a vibration mode's velocity field ([`VelocityMode`]).
+    #[serde(default)]
+    pub velocity_mode: Option<VelocityMode>,
+}
+
+/// The velocity field of the first axial mode of a bar fixed at `origin`
+/// and free at `origin + length axis`: `v(x) = amplitude sin(pi s / (2
+/// length))` with `s = (x - origin) . axis` (m), `axis` a unit vector (it
+/// is normalised). Its exact motion in a 1D bar (`nu = 0`) is `u = v(X)
+/// sin(omega t) / omega`, `omega = pi c / (2 length)`, `c = sqrt(E/rho)`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VelocityMode {
+    /// Velocity at the free end (m/s, a vector).
+    pub amplitude: [f64; 2],
+    /// The fixed end (m).
+    pub origin: [f64; 2],
+    /// Along the bar, from the fixed end.
+    pub axis: [f64; 2],
+    /// The bar's length (m).
+    pub length: f64,
+}
+
+impl VelocityMode {
+    /// The mode's velocity at `x` (m/s).
+    pub fn at(&self, x: [f64; 2]) -> [f64; 2] {
+        let n = self.axis[0].hypot(self.axis[1]);
+        let s = ((x[0] - self.origin[0]) * self.axis[0] + (x[1] - self.origin[1]) * self.axis[1]) / n;
+        let f = (std::f64::consts::FRAC_PI_2 * s / self.length).sin();
+        [self.amplitude[0] * f, self.amplitude[1] * f]
+    }
 }
 
 /// `[[ibm]]`: a Dirichlet condition on a straight line or polyline at any
@@ -423,6 +454,52 @@ pub enum AnalysisKind {
     /// Explicit dynamics (G 2.3): `load_steps` time steps over `duration`,
     /// finite deformation (Hencky, von Mises), plane strain.
     ExplicitDynamics,
+    /// Implicit dynamics: `load_steps` Newmark time steps over `duration`
+    /// (trapezoidal or Bossak, `integrator`), updated Lagrangian, Newton
+    /// in every step with the mass as one more contribution of the
+    /// implicit core; every method of the Newton path combines with it.
+    DynamicImplicit,
+}
+
+impl AnalysisKind {
+    /// Whether the analysis steps through time (`duration`, velocities,
+    /// kinetic energy): explicit or implicit dynamics.
+    pub fn is_dynamic(self) -> bool {
+        matches!(self, AnalysisKind::ExplicitDynamics | AnalysisKind::DynamicImplicit)
+    }
+
+    /// Whether its steps are Newton iterations on the finite-deformation
+    /// residual: quasi-static finite deformation and implicit dynamics.
+    pub fn is_newton(self) -> bool {
+        matches!(self, AnalysisKind::QuasiStaticFinite | AnalysisKind::DynamicImplicit)
+    }
+}
+
+/// The time integrator of implicit dynamics.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Newmark's trapezoidal rule (average acceleration, `beta = 1/4`,
+    /// `gamma = 1/2`): second order, unconditionally stable, no numerical
+    /// damping.
+    #[default]
+    Trapezoidal,
+    /// Bossak's alpha method (Wood, Bossak and Zienkiewicz 1980; Kratos'
+    /// default): the inertia at `(1 - alpha) a_{n+1} + alpha a_n`,
+    /// `gamma = 1/2 - alpha`, `beta = (1 - alpha)^2 / 4`, `alpha` in
+    /// `[-1/3, 0]` (`analysis.bossak_alpha`): second order, damps the
+    /// highest frequencies, more as `alpha` falls.
+    Bossak,
+}
+
+impl Integrator {
+    /// `trapezoidal`, `Bossak`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Integrator::Trapezoidal => "trapezoidal",
+            Integrator::Bossak => "Bossak",
+        }
+    }
 }
 
 /// Which cells count as active for the ghost face set (G 4.2).
@@ -567,13 +644,13 @@ pub struct AnalysisSpec {
     /// Largest system solved with dense eigenvalues in `auto` mode.
     #[serde(default = "default_dense_limit")]
     pub dense_limit: usize,
-    /// Explicit dynamics: simulated time (s), split into `load_steps` equal steps.
+    /// Dynamics (explicit or implicit): simulated time (s), split into `load_steps` equal steps.
     #[serde(default)]
     pub duration: Option<f64>,
-    /// Explicit dynamics: the mass matrix.
+    /// Dynamics: the mass matrix.
     #[serde(default)]
     pub mass: MassKind,
-    /// Explicit dynamics: ghost mass penalty `gamma_M` (kg/m^3; G (20));
+    /// Dynamics: ghost mass penalty `gamma_M` (kg/m^3; G (20));
     /// default a quarter of the largest material density (G 3.3).
     #[serde(default)]
     pub gamma_m: Option<f64>,
@@ -581,6 +658,13 @@ pub struct AnalysisSpec {
     pub stress_update: StressUpdate,
     #[serde(default)]
     pub velocity_update: VelocityUpdate,
+    /// Implicit dynamics: the time integrator.
+    #[serde(default)]
+    pub integrator: Integrator,
+    /// Implicit dynamics with `integrator = "bossak"`: Bossak's `alpha`,
+    /// in `[-1/3, 0]` (0 is the trapezoidal rule).
+    #[serde(default = "default_bossak_alpha")]
+    pub bossak_alpha: f64,
     /// Explicit dynamics: mass condition numbers and the CFL number every
     /// this many steps (0: never; they need dense or Lanczos eigenvalues).
     #[serde(default = "one")]
@@ -594,6 +678,10 @@ pub struct AnalysisSpec {
 
 fn one() -> usize {
     1
+}
+
+fn default_bossak_alpha() -> f64 {
+    -0.1
 }
 
 fn default_blowup() -> f64 {

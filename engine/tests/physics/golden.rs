@@ -368,6 +368,7 @@ macro_rules! golden {
 }
 
 golden! {
+    axial_vibration_implicit => "axial-vibration-implicit",
     block_roller_0 => "block-roller-0",
     block_roller_30 => "block-roller-30",
     block_roller_45 => "block-roller-45",
@@ -382,8 +383,11 @@ golden! {
     deep_beam_self_weight => "deep-beam-self-weight",
     elastic_beam_ghost => "elastic-beam-ghost",
     fe_equivalence => "fe-equivalence",
+    impact_incline_implicit => "impact-incline-implicit",
+    incline_slide_implicit => "incline-slide-implicit",
     funnel => "funnel",
     ghost_collision_elastic => "ghost-collision-elastic",
+    ghost_collision_implicit => "ghost-collision-implicit",
     ghost_collision_plastic => "ghost-collision-plastic",
     patch_compression => "patch-compression",
     plate_hole_dirichlet => "plate-hole-dirichlet",
@@ -402,6 +406,7 @@ golden! {
     square_traction_ibm_45 => "square-traction-ibm-45",
     square_traction_ibm_60 => "square-traction-ibm-60",
     stretching_ghost => "stretching-ghost",
+    stretching_ghost_implicit => "stretching-ghost-implicit",
     thick_cylinder_converging => "thick-cylinder-converging",
     thick_cylinder => "thick-cylinder",
     translating_domain => "translating-domain",

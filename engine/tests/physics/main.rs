@@ -21,6 +21,7 @@ mod finite;
 mod golden;
 mod hencky;
 mod ibm;
+mod newmark;
 mod operators;
 mod patch;
 mod points;
