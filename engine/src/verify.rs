@@ -308,6 +308,7 @@ pub fn plan() -> Plan {
     benchmarks::c_footing(&mut p);
     benchmarks::g_beam(&mut p);
     benchmarks::g_dynamics(&mut p);
+    benchmarks::newmark(&mut p);
     p
 }
 

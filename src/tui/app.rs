@@ -279,8 +279,13 @@ pub struct App {
     pub quit: bool,
     /// Stepping continuously.
     pub running: bool,
-    /// `gamma_M` to start from when raising it from 0 (rho/4 of the densest material).
+    /// `gamma_M` to start from when raising it from 0 (the analysis' default:
+    /// rho/4 of the densest material explicitly, rho/4000 implicitly).
     pub default_gamma_m: f64,
+    /// Implicit dynamics: every step is a Newton solve in time, so Newton's
+    /// knobs (gamma_K, delta, tolerance) and residuals apply as well as
+    /// gamma_M and the energies against time.
+    pub implicit_dynamics: bool,
     /// Canvas magnification (1: the whole grid) and view centre offset (m).
     pub zoom: f64,
     pub pan: [f64; 2],
@@ -337,6 +342,7 @@ impl App {
             quit: false,
             running: false,
             default_gamma_m: sim.model().default_gamma_m(),
+            implicit_dynamics: sim.time().is_some() && sim.model().analysis.kind.is_newton(),
             zoom: 1.0,
             pan: [0.0; 2],
             chart: if sim.time().is_some() {

@@ -45,7 +45,7 @@ pub fn draw(frame: &mut Frame, app: &App) {
     // Taller terminals give the last step and the chart more rows.
     let extra = side.height.saturating_sub(28);
     let [params, last, chart, table] = Layout::vertical([
-        Constraint::Length(3),
+        Constraint::Length(if app.implicit_dynamics { 4 } else { 3 }),
         Constraint::Length(12 + extra / 2),
         Constraint::Length(9 + extra / 4),
         Constraint::Min(3),
@@ -60,7 +60,9 @@ pub fn draw(frame: &mut Frame, app: &App) {
         kind => draw_per_step(frame, app, chart, kind),
     }
     draw_table(frame, app, table);
-    let keys = if app.view.time.is_some() {
+    let keys = if app.implicit_dynamics {
+        "space step · enter run/pause · g/G gamma_K · m/M gamma_M · ? help · q quit"
+    } else if app.view.time.is_some() {
         "space step · enter run/pause · m/M gamma_M · ? help · q quit"
     } else {
         "space step · enter run/pause · g/G gamma_K · ? help · q quit"
@@ -453,7 +455,17 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
     } else {
         "ghost off".to_string()
     };
-    let text = if app.view.time.is_some() {
+    let text = if app.implicit_dynamics {
+        format!(
+            "{ghost}  delta/h {:.0e}  gamma_M {:.3e} {}  tol {:.1e}  max it {}  cond {:?}",
+            p.delta_over_h,
+            p.gamma_m,
+            app.units.of(Quantity::Density),
+            p.tolerance,
+            p.max_iterations,
+            p.condition
+        )
+    } else if app.view.time.is_some() {
         format!(
             "gamma_M {:.3e} {} (m/M: /10, x10)  cond {:?}",
             p.gamma_m,
@@ -467,7 +479,9 @@ fn draw_params(frame: &mut Frame, app: &App, area: Rect) {
         )
     };
     frame.render_widget(
-        Paragraph::new(text).block(Block::default().borders(Borders::ALL).title(" parameters ")),
+        Paragraph::new(text)
+            .wrap(Wrap { trim: true })
+            .block(Block::default().borders(Borders::ALL).title(" parameters ")),
         area,
     );
 }
@@ -971,10 +985,22 @@ fn draw_energies(frame: &mut Frame, app: &App, area: Rect) {
     frame.render_widget(chart, area);
 }
 
-/// The explicit-dynamics lines of the last-step panel.
+/// The dynamics lines of the last-step panel (explicit, or implicit with
+/// its Newton solve).
 fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units) -> Vec<Line<'static>> {
     let e = &r.energy;
     let (en, vel) = (u.of(Quantity::Energy), u.of(Quantity::Velocity));
+    let newton = d.integrator.map(|i| {
+        Line::raw(format!(
+            "Newmark ({}): {} iterations, residual {:.2e}{}",
+            i.label(),
+            r.iterations,
+            r.residuals.last().copied().unwrap_or(f64::NAN),
+            r.condition
+                .map(|c| format!("  cond(K + M/(beta dt^2)) {:.2e}", c.value))
+                .unwrap_or_default()
+        ))
+    });
     let mut lines = vec![
         Line::raw(format!(
             "t = {:.4} s (dt {:.2e} s)  {} mass, {}, {}",
@@ -996,6 +1022,7 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
             d.max_speed
         )),
     ];
+    lines.extend(newton);
     if let Some(c) = &d.conditioning {
         lines.push(Line::raw(format!(
             "cond: M~ {:.2e}  M {:.2e}  lumped {:.2e}  CFL {} s/m",
@@ -1183,7 +1210,9 @@ fn static_lines(r: &StepReport, u: Units, lines: &mut Vec<Line<'static>>) {
 }
 
 fn draw_table(frame: &mut Frame, app: &App, area: Rect) {
-    let header = if app.view.time.is_some() {
+    let header = if app.implicit_dynamics {
+        Row::new(["step", "t s", "unknowns", "bal/W0", "cond(K)", "time s"])
+    } else if app.view.time.is_some() {
         Row::new(["step", "t s", "unknowns", "bal/W0", "cond(M)", "time s"])
     } else {
         Row::new(["step", "load", "unknowns", "residual", "cond(K)", "time s"])

@@ -789,8 +789,60 @@ fn cases() -> Vec<Case> {
         "explicit-no-duration-no-exact",
         "translating-ghost",
         &[("duration = 0.5\n", ""), ("[exact]\nname = \"free-motion\"", "")],
-        "explicit dynamics needs the simulated time",
+        "dynamics needs the simulated time",
         "analysis.duration",
+    );
+    // Implicit dynamics: its own settings, and what it shares.
+    c.scene(
+        "implicit-no-duration",
+        "incline-slide-implicit",
+        &[("duration = 0.1\n", "")],
+        "dynamics needs the simulated time",
+        "analysis.duration",
+    );
+    c.scene(
+        "implicit-bossak-alpha",
+        "incline-slide-implicit",
+        &[(
+            "kind = \"dynamic-implicit\"",
+            "kind = \"dynamic-implicit\"\nintegrator = \"bossak\"\nbossak_alpha = -0.5",
+        )],
+        "must lie in [-1/3, 0]",
+        "analysis.bossak_alpha",
+    );
+    c.scene(
+        "implicit-integrator-typo",
+        "incline-slide-implicit",
+        &[(
+            "kind = \"dynamic-implicit\"",
+            "kind = \"dynamic-implicit\"\nintegrator = \"newmark\"",
+        )],
+        "unknown variant",
+        "analysis.integrator",
+    );
+    c.scene(
+        "implicit-moving-grid-support",
+        "axial-vibration-implicit",
+        &[(
+            "kind = \"roller\"\nx = 0.0",
+            "kind = \"roller\"\nx = 0.0\nnormal_displacement = 0.01",
+        )],
+        "implicit boundary's `displacement`",
+        "dirichlet",
+    );
+    c.scene(
+        "implicit-mode-no-length",
+        "axial-vibration-implicit",
+        &[("length = 1.0 }", "length = 0.0 }")],
+        "positive length",
+        "body[0].velocity_mode",
+    );
+    c.scene(
+        "explicit-ibm-points-to-implicit",
+        "incline-slide-implicit",
+        &[("kind = \"dynamic-implicit\"", "kind = \"explicit-dynamics\"")],
+        "dynamic-implicit",
+        "ibm[0].kind",
     );
     c.scene(
         "explicit-zero-density",

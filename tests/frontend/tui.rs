@@ -198,6 +198,38 @@ fn dynamics_screen_shows_time_energies_and_runs_on() {
 }
 
 #[test]
+fn implicit_dynamics_screen_shows_time_energies_and_its_knobs() {
+    // Implicit dynamics: the same time axis and energies as explicit, the
+    // implicit boundary's delta and both ghost penalties live, and
+    // gamma_M from zero back to implicit dynamics' own default (rho/4000).
+    let mut sim = sim_with("incline-slide-implicit", |_| {});
+    let mut app = App::new(&sim, None);
+    for _ in 0..3 {
+        let r = sim.step().unwrap();
+        app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    }
+    let lines = screen(&app);
+    let all = lines.join("\n");
+    assert!(
+        lines[0].contains("step 3/10") && lines[0].contains("t = 0.0300 s"),
+        "{}",
+        lines[0]
+    );
+    assert!(all.contains("energy (J/m) against time"), "{all}");
+    assert!(all.contains("delta/h 1e-6"), "{all}");
+    assert!(all.contains("gamma_M 2.500e-1"), "{all}");
+    assert!(all.contains("ghost off"), "{all}");
+    assert!(all.contains("Newmark (trapezoidal): "), "{all}");
+    assert!(all.contains("g/G gamma_K · m/M gamma_M"), "{all}");
+    assert_eq!(app.apply(Action::RaiseGammaK), Some(Command::SetGammaK(10.0)));
+    assert_eq!(app.apply(Action::LowerGammaM), Some(Command::SetGammaM(0.025)));
+    match app.apply(Action::LowerDelta) {
+        Some(Command::SetDeltaOverH(d)) => assert!((d - 1e-7).abs() < 1e-20),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
 fn sweep_view_shows_runs_and_charts() {
     use mpmlab::sweep::RunResult;
     use mpmlab::tui::sweep::SweepView;
