@@ -8,7 +8,8 @@
 //! - the same at 10^6 unknowns (one load step each; skip with
 //!   `MPMLAB_BENCH_SMALL=1`);
 //! - a 65,536-point GIMP block, linear and finite deformation: one Newton
-//!   iteration against one linear step on the same grid and points;
+//!   iteration against one linear step on the same grid and points; and
+//!   4 implicit dynamic steps against 4 quasi-static Newton steps;
 //! - the 102,400-point finite-deformation block, 40 load steps;
 //! - the 102,400-point explicit block (point-steps per second).
 //!
@@ -33,6 +34,13 @@ struct Run {
 }
 
 fn block(name: &str, cells: usize, basis: &str, kind: &str, steps: usize, condition: &str) -> String {
+    // Implicit dynamics: one step of 0.1 s each (the block starts at rest
+    // and falls onto its rollers under gravity).
+    let duration = if kind == "dynamic-implicit" {
+        format!("duration = {}\n", 0.1 * steps as f64)
+    } else {
+        String::new()
+    };
     format!(
         r#"[scene]
 name = "{name}"
@@ -66,7 +74,7 @@ gravity = [0.0, -10.0]
 kind = "{kind}"
 load_steps = {steps}
 condition = "{condition}"
-"#
+{duration}"#
     )
 }
 
@@ -93,17 +101,25 @@ fn run(dir: &Path, name: &str, scene: &str, steps: Option<usize>) -> Run {
         name: name.into(),
         ..Default::default()
     };
+    // The step table's columns, from its header (quasi-static and
+    // dynamic tables differ).
+    let (mut unknowns_col, mut iters_col) = (2, 3);
     for line in text.lines() {
         let t: Vec<&str> = line.split_whitespace().collect();
-        if line.starts_with("scene `") {
+        if t.first() == Some(&"step") {
+            unknowns_col = t.iter().position(|w| *w == "unknowns").unwrap_or(2);
+            iters_col = t.iter().position(|w| *w == "iters").unwrap_or(3);
+        } else if line.starts_with("scene `") {
             r.points = t
                 .iter()
                 .position(|w| *w == "points,")
                 .map_or(0, |i| t[i - 1].parse().unwrap_or(0));
         } else if t.first().is_some_and(|w| w.parse::<usize>().is_ok()) && t.len() > 3 {
             r.steps += 1;
-            r.unknowns = r.unknowns.max(t[2].parse().unwrap_or(0));
-            r.iterations += t[3].parse::<usize>().unwrap_or(0);
+            r.unknowns = r
+                .unknowns
+                .max(t.get(unknowns_col).and_then(|w| w.parse().ok()).unwrap_or(0));
+            r.iterations += t.get(iters_col).and_then(|w| w.parse::<usize>().ok()).unwrap_or(0);
         } else if let Some(rest) = line.strip_prefix("phases (s): ") {
             let v: Vec<f64> = rest
                 .split([',', ';'])
@@ -179,6 +195,18 @@ fn main() {
         block("gimp-finite", 128, "gimp", "quasi-static-finite", 1, "off"),
         None,
     );
+    // The same block, 4 steps each, quasi-static and implicit dynamic
+    // (the same 2 Newton iterations a step).
+    let gimp_qs4 = go(
+        "gimp-static-4",
+        block("gimp-static-4", 128, "gimp", "quasi-static-finite", 4, "off"),
+        None,
+    );
+    let gimp_dyn4 = go(
+        "gimp-dynamic-4",
+        block("gimp-dynamic-4", 128, "gimp", "dynamic-implicit", 4, "off"),
+        None,
+    );
     let fin40 = go(
         "finite-102400",
         block("finite-102400", 160, "gimp", "quasi-static-finite", 40, "off"),
@@ -252,6 +280,14 @@ fn main() {
     println!(
         "Newton / linear peak memory, same points: {:.2}x (target <= 2x)",
         gf.peak_mb / gl.peak_mb
+    );
+    let (qs, dy) = (&runs[gimp_qs4], &runs[gimp_dyn4]);
+    println!(
+        "one implicit dynamic step / one quasi-static Newton step, same block: {:.2}x per step, {:.2}x per iteration ({} and {} iterations; target <= 1.2x)",
+        (dy.total / dy.steps.max(1) as f64) / (qs.total / qs.steps.max(1) as f64),
+        (dy.total / dy.iterations.max(1) as f64) / (qs.total / qs.iterations.max(1) as f64),
+        dy.iterations,
+        qs.iterations
     );
     let f = &runs[fin40];
     println!(

@@ -82,8 +82,10 @@ pub struct Simulation {
     pub(crate) model: Model,
     pub(crate) params: Params,
     pub(crate) state: State,
-    /// Explicit dynamics: the mass pattern of the last step.
-    pub(crate) mass_cache: MassCache,
+    /// Dynamics: the mass pattern of the last step (shared by the explicit
+    /// step and the implicit step's projection, which holds the
+    /// simulation by reference).
+    pub(crate) mass_cache: std::sync::Mutex<MassCache>,
     /// Explicit dynamics: the step's buffers, reused from step to step.
     pub(crate) explicit: crate::dynamics::transfer::Workspace,
     /// Threads for the explicit step's per-point passes

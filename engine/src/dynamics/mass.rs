@@ -203,18 +203,17 @@ pub(super) fn consistent_mass(
 /// Pattern and symbolic Cholesky of each scalar part (values only give the
 /// structure here).
 fn analyse_parts(
-    map: &Mapping,
     parts: &[(DofMap, Vec<Vec<usize>>)],
     blocks: &[&[usize]],
-    faces: &[GhostFace],
-    points: &PointsOnGrid,
 ) -> Result<Vec<(Pattern, linalg::CholeskySymbolic)>, linalg::FactorError> {
     parts
         .iter()
         .map(|(dofs, _)| {
+            // The symbolic factorisation reads the structure alone.
             let pattern = Pattern::new(dofs, blocks, Storage::Lower)?;
-            let m = consistent_mass(map, dofs, &pattern, blocks, faces, points, 1.0)?;
-            Ok((pattern, linalg::cholesky_symbolic(m.as_ref())?))
+            let zeros = crate::assembly::try_filled(pattern.nnz(), 0.0, "the values of the mass matrix")?;
+            let symbolic = linalg::cholesky_symbolic(pattern.matrix(&zeros))?;
+            Ok((pattern, symbolic))
         })
         .collect()
 }
@@ -351,8 +350,8 @@ impl GridMass {
         let blocks = blocks_of(map, faces);
         let parts = scalar_parts(&map.dofs);
         let points = PointsOnGrid::of(sim);
-        let analyses = analyse_parts(map, &parts, &blocks, faces, &points)?;
-        let parts = factorise_parts(map, parts, &analyses, &blocks, faces, &points, gamma_m, budget)?;
+        let (cache, _) = analysed(sim, &parts, &blocks)?;
+        let parts = factorise_parts(map, parts, &cache.parts, &blocks, faces, &points, gamma_m, budget)?;
         Ok(GridMass(MassSolver::Consistent(parts)))
     }
 
@@ -369,6 +368,32 @@ impl GridMass {
     }
 }
 
+/// The mass pattern and symbolic Cholesky of each scalar part for these
+/// blocks: the last step's, kept in the simulation, while its blocks
+/// (point groups and ghost faces) are the same, else analysed anew and
+/// kept. Returns the cache, held, and whether it was hit.
+fn analysed<'s>(
+    sim: &'s Simulation,
+    parts: &[(DofMap, Vec<Vec<usize>>)],
+    blocks: &[&[usize]],
+) -> Result<(std::sync::MutexGuard<'s, MassCache>, bool), linalg::FactorError> {
+    // A panic while the cache was held left it whole or stale, never
+    // half-written: it is reset below when its key does not match.
+    let mut cache = sim.mass_cache.lock().unwrap_or_else(|e| e.into_inner());
+    let reused = cache.parts.len() == parts.len()
+        && cache.key.len() == blocks.len()
+        && cache.key.iter().zip(blocks).all(|(k, b)| k.as_slice() == *b);
+    if !reused {
+        *cache = MassCache::default();
+        let parts = analyse_parts(parts, blocks)?;
+        *cache = MassCache {
+            key: blocks.iter().map(|b| b.to_vec()).collect(),
+            parts,
+        };
+    }
+    Ok((cache, reused))
+}
+
 /// Factorise the consistent or stabilised mass of this step (reusing the
 /// cached pattern when the blocks are unchanged). Returns the solver and
 /// whether the cache was hit.
@@ -382,25 +407,13 @@ pub(super) fn factorise_mass(
 ) -> Result<(MassSolver, bool), StepFailure> {
     let blocks = blocks_of(map, faces);
     let parts = scalar_parts(&map.dofs);
-    let cache = &sim.mass_cache;
-    let reused = cache.parts.len() == parts.len()
-        && cache.key.len() == blocks.len()
-        && cache.key.iter().zip(&blocks).all(|(k, b)| k.as_slice() == *b);
-    if !reused {
-        let key: Vec<Vec<usize>> = blocks.iter().map(|b| b.to_vec()).collect();
-        let points = PointsOnGrid {
-            cached,
-            ..PointsOnGrid::of(sim)
-        };
-        let analyses = analyse_parts(map, &parts, &blocks, faces, &points).map_err(|e| match e {
-            e @ linalg::FactorError::Memory { .. } => e.at_step(step),
-            e => StepFailure::Singular {
-                step,
-                reason: format!("mass matrix: {e}"),
-            },
-        })?;
-        sim.mass_cache = MassCache { key, parts: analyses };
-    }
+    let (cache, reused) = analysed(sim, &parts, &blocks).map_err(|e| match e {
+        e @ linalg::FactorError::Memory { .. } => e.at_step(step),
+        e => StepFailure::Singular {
+            step,
+            reason: format!("mass matrix: {e}"),
+        },
+    })?;
     let gamma = if kind == MassKind::Stabilised {
         sim.params.gamma_m
     } else {
@@ -410,8 +423,7 @@ pub(super) fn factorise_mass(
         cached,
         ..PointsOnGrid::of(sim)
     };
-    let analyses = &sim.mass_cache.parts;
-    let parts = factorise_parts(map, parts, analyses, &blocks, faces, &points, gamma, sim.model.max_memory).map_err(|e| match e {
+    let parts = factorise_parts(map, parts, &cache.parts, &blocks, faces, &points, gamma, sim.model.max_memory).map_err(|e| match e {
         e @ linalg::FactorError::Memory { .. } => e.at_step(step),
         e => StepFailure::Singular {
         step,
@@ -458,7 +470,7 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
         let blocks = blocks_of(&map, &faces);
         let parts = scalar_parts(&map.dofs);
         let points = PointsOnGrid::of(sim);
-        let analyses = analyse_parts(&map, &parts, &blocks, &faces, &points).map_err(|e| e.to_string())?;
+        let analyses = analyse_parts(&parts, &blocks).map_err(|e| e.to_string())?;
         let gamma = sim.params.gamma_m;
         MassSolver::Consistent(
             factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX)
@@ -531,7 +543,7 @@ mass = "stabilised"
             let gamma = sim.params.gamma_m;
             let parts = scalar_parts(&map.dofs);
             assert_eq!(parts.len(), if roller { 2 } else { 1 });
-            let analyses = analyse_parts(&map, &parts, &blocks, &faces, &points).unwrap();
+            let analyses = analyse_parts(&parts, &blocks).unwrap();
             let solver = MassSolver::Consistent(
                 factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX).unwrap(),
             );

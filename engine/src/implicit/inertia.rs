@@ -382,27 +382,29 @@ impl Contribution for std::rc::Rc<Inertia> {
             self.faces[k - groups].stiffness(gamma, out);
             return Ok(());
         }
+        // A group's points share one stencil node list, the group's
+        // (`assembly::groups`): a stencil's index is the block's.
         let g = &map.groups[k];
         let m2 = 2 * g.nodes.len();
         out.clear();
         out.resize(m2 * m2, 0.0);
-        let local = |n: usize| g.nodes.iter().position(|&m| m == n);
         for &p in &g.points {
             let m = pts.mass[p] * c0;
             if m == 0.0 {
                 continue;
             }
             let st = map.stencils.get(p);
-            let nodes: Vec<(usize, f64)> = st.iter().filter_map(|(n, w, _)| local(n).map(|a| (a, w))).collect();
-            for &(a, wa) in &nodes {
+            debug_assert_eq!(st.len(), g.nodes.len());
+            for a in 0..st.len() {
+                let wa = m * st.w(a);
                 match self.mass.kind {
                     MassKind::Lumped => {
-                        out[2 * a * m2 + 2 * a] += m * wa;
-                        out[(2 * a + 1) * m2 + 2 * a + 1] += m * wa;
+                        out[2 * a * m2 + 2 * a] += wa;
+                        out[(2 * a + 1) * m2 + 2 * a + 1] += wa;
                     }
                     _ => {
-                        for &(b, wb) in &nodes {
-                            let v = m * wa * wb;
+                        for b in 0..st.len() {
+                            let v = wa * st.w(b);
                             out[2 * a * m2 + 2 * b] += v;
                             out[(2 * a + 1) * m2 + 2 * b + 1] += v;
                         }
