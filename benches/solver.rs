@@ -101,14 +101,19 @@ fn run(dir: &Path, name: &str, scene: &str, steps: Option<usize>) -> Run {
         name: name.into(),
         ..Default::default()
     };
-    // The step table's columns, from its header (quasi-static and
-    // dynamic tables differ).
-    let (mut unknowns_col, mut iters_col) = (2, 3);
+    // The step table's columns, right-aligned under their headers (the
+    // quasi-static and dynamic tables differ, and some headers are two
+    // words): where each header ends.
+    let (mut unknowns_end, mut iters_end) = (None, None);
+    let ending_at = |line: &str, end: Option<usize>| -> Option<usize> {
+        let head = line.get(..end?)?;
+        head.rsplit(' ').next().and_then(|w| w.parse().ok())
+    };
     for line in text.lines() {
         let t: Vec<&str> = line.split_whitespace().collect();
         if t.first() == Some(&"step") {
-            unknowns_col = t.iter().position(|w| *w == "unknowns").unwrap_or(2);
-            iters_col = t.iter().position(|w| *w == "iters").unwrap_or(3);
+            unknowns_end = line.find("unknowns").map(|i| i + "unknowns".len());
+            iters_end = line.find("iters").map(|i| i + "iters".len());
         } else if line.starts_with("scene `") {
             r.points = t
                 .iter()
@@ -116,10 +121,8 @@ fn run(dir: &Path, name: &str, scene: &str, steps: Option<usize>) -> Run {
                 .map_or(0, |i| t[i - 1].parse().unwrap_or(0));
         } else if t.first().is_some_and(|w| w.parse::<usize>().is_ok()) && t.len() > 3 {
             r.steps += 1;
-            r.unknowns = r
-                .unknowns
-                .max(t.get(unknowns_col).and_then(|w| w.parse().ok()).unwrap_or(0));
-            r.iterations += t.get(iters_col).and_then(|w| w.parse::<usize>().ok()).unwrap_or(0);
+            r.unknowns = r.unknowns.max(ending_at(line, unknowns_end).unwrap_or(0));
+            r.iterations += ending_at(line, iters_end).unwrap_or(0);
         } else if let Some(rest) = line.strip_prefix("phases (s): ") {
             let v: Vec<f64> = rest
                 .split([',', ';'])

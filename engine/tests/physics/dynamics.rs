@@ -75,7 +75,10 @@ fn stretching_ghost_follows_the_exact_path() {
     let last = run(&mut sim).pop().unwrap();
     let e = error(&last, "displacement_max");
     println!("stretching ghost, lumped FLIP: error at 1 s {e:.3e} m");
-    assert!(e > 1e-4 && e < 1e-1, "{e}");
+    // G Fig. 11c's colour bar ends at 3e-2 m, read to one digit; ours
+    // 3.385e-2 m (13% above): within 20% of G's. (Was anywhere in
+    // 1e-4..1e-1.)
+    assert!((e / 3e-2 - 1.0).abs() < 0.2, "{e}");
 }
 
 #[test]
@@ -132,8 +135,11 @@ fn translating_ghost_conditioning_and_velocity_mapping() {
         }
     }
     println!("max cond: stabilised {stab:.3e}, consistent {cons:.3e}, lumped {lump:.3e}; velocity error {worst_velocity:.2e}");
-    // Stabilised: bounded (G: ~4e5; ours ~3e2, see docs/verification.md).
-    assert!(stab < 1e6, "{stab:e}");
+    // Stabilised: bounded (G: ~4e5; ours 2.7e2, see docs/verification.md,
+    // our face set also covers cells only a GIMP domain reaches). Asserted
+    // below 1e3, a margin of 3.7 over the measured value (was 1e6): a
+    // gamma_M ten times too small gives 2.7e3.
+    assert!(stab < 1e3, "{stab:e}");
     // Unstabilised: beyond 1e20 at some positions. Most positions are
     // singular to working precision (the Cholesky breaks down with the
     // smallest eigenvalue at -1e-16 of the largest), reported as infinite.
@@ -272,8 +278,12 @@ fn translating_domain_mass_conditioning() {
         assert!(worst[0] > 1e8, "{basis:?}: {worst:?}");
         assert!(worst[1] < 1e3, "{basis:?}: {worst:?}");
         // G Fig. 7: the stabilised CFL number is nearly position independent
-        // (within a factor 2 here), the unstabilised one collapses by orders.
-        assert!(cfl_s.1 / cfl_s.0 < 2.0, "{basis:?}: {cfl_s:?}");
+        // (measured 0.266..0.312 s/m for sMPM, 17%, and 0.280..0.306 s/m for
+        // GIMP, 9%: within 20% here, was a factor 2), the unstabilised one
+        // collapses by orders. Its level is held to the measured range
+        // with 6% margin either side, so a CFL number off by 2 fails.
+        assert!(cfl_s.1 / cfl_s.0 < 1.2, "{basis:?}: {cfl_s:?}");
+        assert!(cfl_s.0 > 0.25 && cfl_s.1 < 0.33, "{basis:?}: {cfl_s:?}");
         assert!(cfl_c.1 / cfl_c.0 > 100.0, "{basis:?}: {cfl_c:?}");
     }
 }
@@ -517,6 +527,22 @@ fn elastic_collision_energy_error() {
     // error lives on the contact, where those points differ. Measured
     // 1.1475e-3, 29% above G's 0.888e-3: asserted within 35%.
     assert!((e1 / 0.888e-3 - 1.0).abs() < 0.35, "{e1:e}");
+    // What the method gives on our ghosts is held tighter: gamma_M
+    // enters the USF energy error through the mapped velocities, and
+    // twice G's rho/4 must show.
+    // Measured 1.1475e-3 at rho/4 and 1.0838e-3 (5.6% lower) at rho/2; a
+    // mean over 1000 steps of a mass conditioned at 84 moves by round-off
+    // in far later digits: held within 2% of the measured value.
+    let e_half = mean_energy_error(&collision(1000, MassKind::Stabilised, StressUpdate::Usf, Some(500.0)));
+    println!(
+        "USF stabilised at gamma_M = rho/2: {e_half:.4e} ({:.4} x rho/4)",
+        e_half / e1
+    );
+    assert!((e1 / 1.1475e-3 - 1.0).abs() < 0.02, "{e1:e}");
+    assert!(
+        (e_half / 1.1475e-3 - 1.0).abs() > 0.02,
+        "rho/2 indistinguishable: {e_half:e}"
+    );
     // Halving the time step halves the error: USF gains dt^2 a.M a / 2 per
     // step (docs/verification.md), t/dt steps make it first order in dt, so
     // the ratio is 1/2 up to O(dt) terms (G: 0.501; measured 0.506).
@@ -584,7 +610,10 @@ fn plastic_collision_dissipates() {
     );
     println!("W0 {w0:.5e} J; dissipation at 2 s {d2:.4e} J, at 3.5 s {d35:.4e} J");
     assert!(d2 > 0.0 && d35 > d2, "{d2:e} {d35:e}");
-    assert!(d35 > 0.05 * w0, "{d35:e}");
+    // Measured 1.4357 J of W0 = 2.14578 J at 3.5 s (0.669 W0; was
+    // asserted only above 0.05 W0): held within 0.02 W0, so a dissipation
+    // 10% off (0.067 W0) fails.
+    assert!((d35 / w0 - 0.669).abs() < 0.02, "{d35:e} of {w0:e}");
     for r in &reports {
         let e = r.energy.kinetic + r.energy.strain + r.energy.plastic_dissipation;
         let d = r.dynamics.as_ref().unwrap();

@@ -296,14 +296,27 @@ fn column_converges_with_and_without_ghost() {
 
 #[test]
 fn column_error_is_insensitive_to_gamma_on_a_fine_grid() {
-    // G Table 4: at h = 50/2^9 twelve orders of gamma_K/E change the error by
-    // 0.49% (measured here 0.35%): no more than G's 0.49%.
-    let e: Vec<f64> = [1e-6, 1.0, 1e6].iter().map(|g| column_error(512, g * 10.0e3)).collect();
-    println!("h = 50/512, gamma/E = 1e-6, 1, 1e6: {e:?}");
+    // G Table 4: at h = 50/2^9 twelve orders of gamma_K/E (seven values)
+    // change the error by 0.49%.
+    let gammas = [1e-6, 1e-4, 1e-2, 1.0, 1e2, 1e4, 1e6];
+    let e: Vec<f64> = gammas.iter().map(|g| column_error(512, g * 10.0e3)).collect();
     let (lo, hi) = e
         .iter()
         .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
-    assert!((hi - lo) / lo < 0.0049, "{e:?}");
+    println!(
+        "h = 50/512, gamma/E = {gammas:?}: {e:?}; spread {:.3}%",
+        100.0 * (hi - lo) / lo
+    );
+    // All seven of G's values: G's spread is 0.49%; ours is 0.57%, the
+    // lowest value (4.9256e-5 at gamma_K/E = 1e2) below G's range: our
+    // penalised face set is not G's (docs/verification.md). Asserted
+    // within 0.6%, and the three values 1e-6, 1, 1e6 within G's 0.49%.
+    assert!((hi - lo) / lo < 0.006, "{e:?}");
+    let three = [e[0], e[3], e[6]];
+    let (lo3, hi3) = three
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!((hi3 - lo3) / lo3 < 0.0049, "{three:?}");
     // At gamma_K/E = 1e-6 the penalty is a millionth of the bulk stiffness:
     // the run is plain GIMP on G's grid, points and load steps, so it must
     // give G's 4.938e-5 to G's digits (within half a unit of the last one;
@@ -370,14 +383,32 @@ fn beam_stability_ghost_completes_where_plain_gimp_fails() {
         assert_eq!(steps, 50);
         assert!(most <= 10);
     }
-    match beam(0.25, 2, 0.0) {
-        Err((done, kappa, StepFailure::NotConverged { step, residuals, .. })) => {
-            println!("plain GIMP h=0.25 n=2 fails at step {step} after {done} steps (kappa {kappa:e}): {residuals:?}");
-            assert_eq!(step, done + 1);
-            assert!(kappa > 1.0 / f64::EPSILON, "kappa {kappa:e} before the failure");
-            assert!(step <= 2 * 11 + 1, "failed at step {step}, G after 11 steps");
+    // G Table 5's plain 2x2 runs: h = 0.5 stops after 5 steps, h = 0.25
+    // after 11; h = 0.125's entry is a failure whose step the paper's text
+    // does not give legibly, held here to the same bound as h = 0.25
+    // (measured: 5, 12 and 10 steps completed).
+    for (h, g) in [(0.5, 5), (0.25, 11), (0.125, 11)] {
+        match beam(h, 2, 0.0) {
+            Err((done, kappa, StepFailure::NotConverged { step, residuals, .. })) => {
+                println!(
+                    "plain GIMP h={h} n=2 fails at step {step} after {done} steps (kappa {kappa:e}): {residuals:?}"
+                );
+                assert_eq!(step, done + 1);
+                if h == 0.5 {
+                    // Decided by the method, not round-off: every completed
+                    // tangent is below 1/eps (2.7e13 at most) and step 6's
+                    // residual stalls between 1e-1 and 8e-6 against the
+                    // tolerance 1e-6 for all 10 iterations. G's 5 stable
+                    // steps, exactly.
+                    assert!(kappa < 1e-2 / f64::EPSILON, "h {h}: kappa {kappa:e}");
+                    assert_eq!(done, g, "h {h}: G's final stable step is {g}");
+                } else {
+                    assert!(kappa > 1.0 / f64::EPSILON, "h {h}: kappa {kappa:e} before the failure");
+                    assert!(step <= 2 * g + 1, "h {h}: failed at step {step}, G after {g} steps");
+                }
+            }
+            other => panic!("h {h}: expected a reported non-convergence, got {other:?}"),
         }
-        other => panic!("expected a reported non-convergence, got {other:?}"),
     }
 }
 
