@@ -29,6 +29,20 @@
 //!   The cap is still three orders below what a wrong method moves (the
 //!   papers' differences between methods are percents).
 //!
+//! Where round-off decides a scene's path (which Newton iteration meets
+//! the tolerance, whether a cycling Newton is cut back), comparing it
+//! step by step would fail a right program: writing the file also runs
+//! each scene with every material's stiffness and density changed by a
+//! few ulps (1e-15 and 1e-14 relative, either sign) and stores, as
+//! `robust`, how many steps all of them keep the counts of. Beyond them
+//! only the energies are compared, at 3e-2 of their scale. (Found when
+//! summing the inertia's blocks with the points' before scattering them
+//! moved `impact-incline-implicit`'s iterations from step 16 and its
+//! cutbacks from step 20; three scenes are such: `collapse-von-mises`,
+//! `rigid-footing-large` and `impact-incline-implicit`, whose plastic
+//! and contact steps end where Newton meets its tolerance by a hair or
+//! cycles before it is cut back.)
+//!
 //! Scenes of more than 100 steps (explicit dynamics) store every
 //! `ceil(n / 100)`-th step and the last: a changed step changes every step
 //! after it.
@@ -50,6 +64,10 @@ struct Summary {
     steps: Vec<BTreeMap<String, Value>>,
     end: String,
     kappa: f64,
+    /// How many steps keep their counts (iterations, cutbacks, ...) when
+    /// every material's stiffness and density move by a few ulps: beyond
+    /// them the path is decided by round-off (None: every step).
+    robust: Option<usize>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -137,8 +155,18 @@ fn of_failure(f: &StepFailure) -> String {
 
 /// Run a shipped scene to its end or its first failure.
 fn run(name: &str) -> Summary {
+    run_perturbed(name, 0.0)
+}
+
+/// Run a shipped scene with every material's `E` and density scaled by
+/// `1 + eps`.
+fn run_perturbed(name: &str, eps: f64) -> Summary {
     let text = std::fs::read_to_string(scene_path(name)).expect("scene file");
-    let scene = Scene::parse(&text, name).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let mut scene = Scene::parse(&text, name).unwrap_or_else(|e| panic!("{name}: {e}"));
+    for m in &mut scene.materials {
+        m.e *= 1.0 + eps;
+        m.density *= 1.0 + eps;
+    }
     let mut sim = Simulation::new(Model::build(&scene, &text, name).unwrap_or_else(|e| panic!("{name}: {e}")));
     let mut s = Summary::default();
     while !sim.finished() {
@@ -176,6 +204,7 @@ fn read_golden() -> BTreeMap<String, Summary> {
         match f[1] {
             "end" => e.end = f[2].to_string(),
             "kappa" => e.kappa = f[2].parse().unwrap_or_else(|_| panic!("{}", bad())),
+            "robust" => e.robust = Some(f[2].parse().unwrap_or_else(|_| panic!("{}", bad()))),
             "steps" => {
                 let n: usize = f[2].parse().unwrap_or_else(|_| panic!("{}", bad()));
                 e.steps.resize(n, BTreeMap::new());
@@ -202,7 +231,9 @@ fn write_golden(all: &BTreeMap<String, Summary>) {
     let mut text = String::from(
         "# Golden summaries of every shipped scene (engine/tests/physics/golden.rs).\n\
          # scene<TAB>step<TAB>quantity<TAB>value (#n: a count); per scene `end`,\n\
-         # `kappa` (the largest condition number) and `steps` (completed steps).\n",
+         # `kappa` (the largest condition number) and `steps` (completed steps);\n\
+         # `robust`: the steps whose counts changes of a few ulps in the materials keep,\n\
+         # for a scene whose later path round-off decides.\n",
     );
     for (name, s) in all {
         let n = s.steps.len();
@@ -210,6 +241,9 @@ fn write_golden(all: &BTreeMap<String, Summary>) {
             "{name}\tend\t{}\n{name}\tkappa\t{:e}\n{name}\tsteps\t{n}\n",
             s.end, s.kappa
         );
+        if let Some(k) = s.robust {
+            text += &format!("{name}\trobust\t{k}\n");
+        }
         let stride = n.div_ceil(100).max(1);
         for (i, step) in s.steps.iter().enumerate() {
             if (i + 1) % stride != 0 && i + 1 != n {
@@ -292,6 +326,28 @@ fn compare(name: &str, now: &Summary, gold: &Summary) -> Vec<String> {
         if g.is_empty() {
             continue;
         }
+        // Beyond its robust steps a scene's path is round-off's: only its
+        // energies (not their balance, which measures the path) are
+        // compared, at 3e-2 of their scale. Another summation order moved
+        // the impact scene's plastic dissipation by 1.1% of that scale and
+        // its balance by 1.9% at its end; a wrong method moves the
+        // energies by more (the papers' methods differ by percents of
+        // the work, plastic collapse loads by 5-15%).
+        let decided = gold.robust.is_none_or(|k| i < k);
+        if !decided {
+            for (k, gv) in g.iter().filter(|(k, _)| k.starts_with("energy.")) {
+                if let (Value::Number(a), Some(Value::Number(b))) = (gv, n.get(k)) {
+                    if (a - b).abs() > 3e-2 * scale_of(k) {
+                        out.push(format!(
+                            "{name} step {} (path decided by round-off): {k} = {b:e}, golden {a:e} (3e-2 of {:e})",
+                            i + 1,
+                            scale_of(k)
+                        ));
+                    }
+                }
+            }
+            continue;
+        }
         if g.keys().ne(n.keys()) {
             out.push(format!("{name} step {}: quantities differ", i + 1));
             continue;
@@ -317,10 +373,44 @@ fn compare(name: &str, now: &Summary, gold: &Summary) -> Vec<String> {
     out
 }
 
+/// The steps of `run` whose counts every one of a few changes of a few
+/// ulps (relative 1e-15 and 1e-14, either sign) in every material's
+/// stiffness and density keeps, when a changed run's counts differ
+/// somewhere (else None: the whole path is the method's).
+fn robust_steps(name: &str, run: &Summary) -> Option<usize> {
+    let counts = |m: &BTreeMap<String, Value>| -> Vec<(String, usize)> {
+        m.iter()
+            .filter_map(|(k, v)| match v {
+                Value::Count(c) => Some((k.clone(), *c)),
+                Value::Number(_) => None,
+            })
+            .collect()
+    };
+    [1e-15, -1e-15, 1e-14, -1e-14]
+        .iter()
+        .filter_map(|&eps| {
+            let other = run_perturbed(name, eps);
+            let first = run
+                .steps
+                .iter()
+                .zip(&other.steps)
+                .position(|(a, b)| counts(a) != counts(b));
+            match first {
+                Some(i) => Some(i),
+                None if run.steps.len() != other.steps.len() || run.end != other.end => {
+                    Some(run.steps.len().min(other.steps.len()))
+                }
+                None => None,
+            }
+        })
+        .min()
+}
+
 /// Run one scene and compare it with its golden summary (or store it).
 fn check(name: &str) {
-    let now = run(name);
+    let mut now = run(name);
     if std::env::var("MPMLAB_GOLDEN").as_deref() == Ok("write") {
+        now.robust = robust_steps(name, &now);
         // Scenes write one at a time (the harness runs tests in parallel).
         static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
         let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
