@@ -503,3 +503,40 @@ impl Merged {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The regrowing schedule's increments tile the step: each starts
+    /// where the last ended, the first on `lambda_0`, the last on
+    /// `lambda_1` exactly, and none is a sliver, whether the halves sum to
+    /// `lambda_1` exactly (0 -> 1) or a few ulps short of it (0.7 -> 0.9:
+    /// 0.7 + 0.1 + 0.1 = 0.8999999999999999), with the increments grown
+    /// back (an easy increment) or not.
+    #[test]
+    fn regrown_increments_tile_the_step() {
+        for (from, to) in [(0.0, 1.0), (0.7, 0.9), (0.1, 0.4)] {
+            for iterations in [1, 9] {
+                let whole = Span::whole(from, to, to - from);
+                let mut pending = Pending::new(Schedule::Regrow { max_iterations: 10 }, whole);
+                let mut spans = Vec::new();
+                loop {
+                    let span = pending.next();
+                    spans.push((span.from, span.to));
+                    assert!(spans.len() < 10, "{spans:?}");
+                    let mut r = StepReport::new(1, 1, span.to);
+                    r.iterations = iterations;
+                    if pending.passed(span, &r) {
+                        break;
+                    }
+                }
+                assert_eq!(spans[0].0, from, "{spans:?}");
+                assert_eq!(spans[spans.len() - 1].1, to, "{spans:?}");
+                assert!(spans.windows(2).all(|w| w[0].1 == w[1].0), "{spans:?}");
+                // The first half is the smallest increment either way.
+                assert!(spans.iter().all(|(a, b)| b - a > 0.49 * (to - from)), "{spans:?}");
+            }
+        }
+    }
+}
