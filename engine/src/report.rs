@@ -442,6 +442,19 @@ pub struct DynamicsReport {
     pub integrator: Option<crate::scene::Integrator>,
 }
 
+impl DynamicsReport {
+    /// The CFL number (s/m) of the mass in use, on the steps that measured
+    /// the conditioning.
+    pub fn cfl(&self) -> Option<f64> {
+        let c = self.conditioning.as_ref()?;
+        match self.mass {
+            MassKind::Stabilised => c.cfl_stabilised,
+            MassKind::Consistent => c.cfl_consistent,
+            MassKind::Lumped => c.cfl_lumped,
+        }
+    }
+}
+
 /// Condition numbers of the three mass matrices at one configuration, and
 /// the CFL numbers `C = 1 / (h sqrt(lambda_max(K, M)))` (s/m; G 3.5) with
 /// each. A matrix that is not numerically positive definite has condition

@@ -70,11 +70,7 @@ pub fn dynamics_row(r: &StepReport) -> String {
     let balance = sci_or_dash(relative_balance(d), 3);
     let c = |v: Option<f64>| sci_or_dash(v, 3);
     let cond = d.conditioning.as_ref();
-    let cfl = cond.and_then(|c| match d.mass {
-        mpmlab::scene::MassKind::Stabilised => c.cfl_stabilised,
-        mpmlab::scene::MassKind::Consistent => c.cfl_consistent,
-        mpmlab::scene::MassKind::Lumped => c.cfl_lumped,
-    });
+    let cfl = d.cfl();
     let mut s = format!(
         "{:>6} {:>9.4} {:>8} {:>11.4e} {:>11.4e} {:>11.4e} {:>11} {:>10} {:>10} {:>10} {:>10}",
         r.step,

@@ -1025,11 +1025,12 @@ fn dynamics_lines(r: &StepReport, d: &crate::dynamics::DynamicsReport, u: Units)
     lines.extend(newton);
     if let Some(c) = &d.conditioning {
         lines.push(Line::raw(format!(
-            "cond: M~ {:.2e}  M {:.2e}  lumped {:.2e}  CFL {} s/m",
+            "cond: M~ {:.2e}  M {:.2e}  lumped {:.2e}  CFL\u{a0}({}\u{a0}mass)\u{a0}{}\u{a0}s/m",
             c.mass_stabilised.value,
             c.mass_consistent.value,
             c.mass_lumped.value,
-            format::sci_or_dash(c.cfl_stabilised, 3)
+            d.mass.label(),
+            format::sci_or_dash(d.cfl(), 3)
         )));
     }
     if !d.cutbacks.is_empty() {

@@ -195,6 +195,25 @@ fn dynamics_screen_shows_time_energies_and_runs_on() {
     assert!(all.contains("gamma_M 2.500e2"), "{all}");
     // gamma_M changes in decades and reaches the engine as a command.
     assert_eq!(app.apply(Action::LowerGammaM), Some(Command::SetGammaM(25.0)));
+    // The CFL number shown is the mass in use's, as in the step table:
+    // the lumped mass's differs from the stabilised one's.
+    let mut sim = sim_with("ghost-collision-elastic", |s| {
+        s.analysis.mass = mpmlab::scene::MassKind::Lumped;
+        s.analysis.condition_every = 1;
+    });
+    let mut app = App::new(&sim, None);
+    let r = sim.step().unwrap();
+    let c = r.dynamics.as_ref().unwrap().conditioning.unwrap();
+    let (lumped, stabilised) = (c.cfl_lumped.unwrap(), c.cfl_stabilised.unwrap());
+    assert!((lumped / stabilised - 1.0).abs() > 1e-3, "{lumped} {stabilised}");
+    app.update(Update::Stepped(Box::new(r), Box::new(View::of(&sim, app.view.field))));
+    let all = screen(&app).join("\n");
+    // (No-break spaces: a narrow panel wraps before the pair, not inside.)
+    let shown = format!(
+        "CFL\u{a0}(lumped\u{a0}mass)\u{a0}{}",
+        mpmlab::format::sci_or_dash(Some(lumped), 3)
+    );
+    assert!(all.contains(&shown), "{shown}\n{all}");
 }
 
 #[test]
