@@ -18,6 +18,7 @@ pub mod colormap;
 pub mod csv;
 pub mod format;
 pub mod record;
+pub mod shipped;
 pub mod sweep;
 pub mod tui;
 pub mod vtk;

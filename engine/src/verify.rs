@@ -312,11 +312,37 @@ pub fn plan() -> Plan {
     p
 }
 
+/// Where the shipped scenes are read from.
+#[derive(Clone, Copy, Debug)]
+pub enum Scenes<'a> {
+    /// A folder of `NAME.toml` files (the checkout's `scenarios/`).
+    Folder(&'a Path),
+    /// `(name, text)` pairs built into the program.
+    Builtin(&'a [(&'a str, &'a str)]),
+}
+
+impl Scenes<'_> {
+    /// The text of scene `name` and the file name its errors cite.
+    fn read(&self, name: &str) -> Result<(String, String), String> {
+        match self {
+            Scenes::Folder(dir) => {
+                let path = dir.join(format!("{name}.toml"));
+                let file = path.display().to_string();
+                let text = std::fs::read_to_string(&path).map_err(|e| format!("{file}: {e}"))?;
+                Ok((text, file))
+            }
+            Scenes::Builtin(list) => list
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, text)| (text.to_string(), format!("{name}.toml (built in)")))
+                .ok_or_else(|| format!("{name}: no such shipped scene")),
+        }
+    }
+}
+
 /// Run one scene with its edits to the end or the first failure.
-fn run_one(spec: &RunSpec, dir: &Path, stop: &std::sync::atomic::AtomicBool) -> Result<Outcome, String> {
-    let path = dir.join(format!("{}.toml", spec.scene));
-    let file = path.display().to_string();
-    let text = std::fs::read_to_string(&path).map_err(|e| format!("{file}: {e}"))?;
+fn run_one(spec: &RunSpec, scenes: Scenes, stop: &std::sync::atomic::AtomicBool) -> Result<Outcome, String> {
+    let (text, file) = scenes.read(spec.scene)?;
     let mut scene = Scene::parse(&text, &file).map_err(|e| e.to_string())?;
     (spec.edit)(&mut scene);
     let model = Model::build(&scene, &text, &file).map_err(|e| e.to_string())?;
@@ -343,7 +369,7 @@ fn run_one(spec: &RunSpec, dir: &Path, stop: &std::sync::atomic::AtomicBool) -> 
     })
 }
 
-/// Run the checks (`quick`: only those CI runs) with the scenes in `dir`;
+/// Run the checks (`quick`: only those CI runs) with the scenes of `scenes`;
 /// `progress` hears of every run. A run that cannot be built or stops
 /// early fails the rows that read it, with the reason.
 /// What `verify` found: the rows, and the measured tables as
@@ -354,7 +380,7 @@ pub struct Verified {
 }
 
 pub fn verify(
-    dir: &Path,
+    scenes: Scenes,
     quick: bool,
     stop: &std::sync::atomic::AtomicBool,
     progress: &mut dyn FnMut(&str),
@@ -368,7 +394,7 @@ pub fn verify(
         if !checks.iter().any(|c| c.runs.contains(&spec.id)) && !tables.iter().any(|t| t.runs.contains(&spec.id)) {
             continue;
         }
-        match run_one(spec, dir, stop) {
+        match run_one(spec, scenes, stop) {
             Ok(o) => {
                 progress(&format!(
                     "ran {} ({}): {} steps in {:.2} s{}",

@@ -326,7 +326,8 @@ pub struct SweepArgs {
 /// Arguments of `mpmlab verify`.
 #[derive(clap::Args)]
 pub struct VerifyArgs {
-    /// Only the rows CI runs (about a minute); the full set takes longer.
+    /// Only the rows CI runs (about 2 s on two cores); the full set takes
+    /// about half a minute.
     #[arg(long)]
     pub quick: bool,
     /// Also write the rows as CSV
@@ -337,7 +338,8 @@ pub struct VerifyArgs {
     /// `verify` markers; e.g. docs/verification.md) with the rows.
     #[arg(long, value_name = "FILE")]
     pub write_docs: Option<PathBuf>,
-    /// Folder of the shipped scenes.
-    #[arg(long, default_value = "scenarios")]
-    pub scenes: PathBuf,
+    /// Folder of the shipped scenes [default: ./scenarios when there is
+    /// one, else the copies built into this program].
+    #[arg(long, value_name = "DIR")]
+    pub scenes: Option<PathBuf>,
 }

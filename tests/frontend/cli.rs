@@ -286,6 +286,39 @@ fn record_cadence_flags_and_the_size_report() {
 }
 
 #[test]
+fn verify_runs_from_any_folder_with_the_scenes_built_in() {
+    // Outside the checkout there is no ./scenarios: the quick set runs on
+    // the copies built into the program, and says so; a --scenes folder
+    // that is not there is refused by name.
+    let dir = common::temp_path("verify-elsewhere", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpmlab"))
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, out, err) = run(&["verify", "--quick"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(err.contains("built into this program"), "{err}");
+    let last = out.lines().rev().find(|l| l.contains("rows pass")).unwrap_or_default();
+    let n: Vec<&str> = last.split_whitespace().collect();
+    assert!(n.len() > 3 && n[0] == n[2] && n[0] != "0", "{out}");
+    let (code, _, err) = run(&["verify", "--quick", "--scenes", "no-such-folder"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--scenes no-such-folder: no such folder of scenes"),
+        "{err}"
+    );
+}
+
+#[test]
 fn verify_passes_and_the_docs_hold_its_numbers() {
     // `mpmlab verify` (the full set: about 30 s in release): every paper
     // row within its tolerance, as CSV with the documented columns.
