@@ -94,7 +94,18 @@ impl Simulation {
             path: path.to_path_buf(),
             message,
         };
-        let bytes = std::fs::read(path).map_err(|e| read(crate::scene::io_reason(&e)))?;
+        // A checkpoint larger than the run's memory budget could not be
+        // loaded anyway; a FIFO or device would block or never end.
+        use crate::scene::Refusal;
+        let limit = self.model.max_memory;
+        let bytes = crate::scene::read_regular_file(path, limit).map_err(|r| {
+            read(match r {
+                Refusal::Io(reason) => reason,
+                Refusal::Directory => "it is a directory, not a checkpoint file".into(),
+                Refusal::NotRegular(kind) => format!("it is not a regular file ({kind})"),
+                Refusal::TooLarge(_) => format!("it is larger than the run's memory budget ({limit} bytes)"),
+            })
+        })?;
         let body = bytes
             .strip_prefix(MAGIC)
             .ok_or_else(|| read("not an mpmlab checkpoint (it does not start with `mpmlab checkpoint`)".into()))?;

@@ -1636,6 +1636,30 @@ fn files_that_are_not_scenes_are_refused_before_reading() {
     let (code, _, err) = run(&big);
     assert_eq!(code, 2);
     assert!(err.contains("limited to 4194304 bytes"), "{err}");
+
+    // A checkpoint to resume from is read the same way: a FIFO, a device
+    // (`/dev/zero` never ends) and a directory are refused before they
+    // are opened; a file larger than the run's memory budget is refused
+    // by its size.
+    let scene = "scenarios/patch-compression.toml";
+    for (ck, why) in [
+        (fifo.to_str().unwrap(), "not a regular file (a FIFO)"),
+        ("/dev/zero", "not a regular file (a character device)"),
+        (dir.to_str().unwrap(), "is a directory"),
+    ] {
+        let (code, _, err) = mpmlab(&["run", scene, "--resume", ck]);
+        assert_eq!(code, 2, "{ck}: {err}");
+        assert!(
+            err.contains(&format!("cannot read checkpoint {ck}")) && err.contains(why),
+            "{ck}: {err}"
+        );
+    }
+    // (The patch needs about 17 MB by its estimate; 20 MB lets it build.)
+    let huge = dir.join("huge.ckpt");
+    std::fs::write(&huge, vec![b'#'; 21 << 20]).unwrap();
+    let (code, _, err) = mpmlab(&["run", scene, "--resume", huge.to_str().unwrap(), "--max-memory", "20M"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("larger than the run's memory budget"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

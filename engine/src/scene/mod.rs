@@ -800,43 +800,24 @@ pub fn read_scene_text(path: &Path) -> Result<String, SceneError> {
         field: field.into(),
         message,
     };
-    let meta = std::fs::metadata(path).map_err(|e| fail(0, 0, "(file)", format!("cannot read: {}", io_reason(&e))))?;
-    if meta.is_dir() {
-        return Err(fail(0, 0, "(file)", "is a directory, not a scene file".into()));
-    }
-    if !meta.is_file() {
-        return Err(fail(
+    let bytes = read_regular_file(path, MAX_SCENE_BYTES).map_err(|r| {
+        fail(
             0,
             0,
             "(file)",
-            format!("is not a regular file ({}); give a scene file", file_kind(&meta)),
-        ));
-    }
-    if meta.len() > MAX_SCENE_BYTES {
-        return Err(fail(
-            0,
-            0,
-            "(file)",
-            format!(
-                "is {} bytes; scene files are limited to {} bytes",
-                meta.len(),
-                MAX_SCENE_BYTES
-            ),
-        ));
-    }
-    use std::io::Read as _;
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_SCENE_BYTES + 1).read_to_end(&mut bytes))
-        .map_err(|e| fail(0, 0, "(file)", format!("cannot read: {}", io_reason(&e))))?;
-    if bytes.len() as u64 > MAX_SCENE_BYTES {
-        return Err(fail(
-            0,
-            0,
-            "(file)",
-            format!("is larger than the {MAX_SCENE_BYTES} bytes scene files are limited to"),
-        ));
-    }
+            match r {
+                Refusal::Io(reason) => format!("cannot read: {reason}"),
+                Refusal::Directory => "is a directory, not a scene file".into(),
+                Refusal::NotRegular(kind) => format!("is not a regular file ({kind}); give a scene file"),
+                Refusal::TooLarge(Some(n)) => {
+                    format!("is {n} bytes; scene files are limited to {MAX_SCENE_BYTES} bytes")
+                }
+                Refusal::TooLarge(None) => {
+                    format!("is larger than the {MAX_SCENE_BYTES} bytes scene files are limited to")
+                }
+            },
+        )
+    })?;
     String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let valid = std::str::from_utf8(&e.as_bytes()[..at]).unwrap_or_default();
@@ -852,6 +833,45 @@ pub fn read_scene_text(path: &Path) -> Result<String, SceneError> {
             ),
         )
     })
+}
+
+/// Why an input file was not read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Refusal {
+    /// The operating system's reason, in words.
+    Io(String),
+    Directory,
+    /// Not a regular file: what it is (a FIFO, a device, ...), which could
+    /// block a reader or never end.
+    NotRegular(&'static str),
+    /// Larger than the limit: its size, or None when it grew past the
+    /// limit while being read.
+    TooLarge(Option<u64>),
+}
+
+/// The bytes of the regular file at `path`, of at most `limit` bytes: a
+/// directory, FIFO, socket or device is refused before it is opened, and
+/// no more than `limit + 1` bytes are ever read.
+pub fn read_regular_file(path: &Path, limit: u64) -> Result<Vec<u8>, Refusal> {
+    let meta = std::fs::metadata(path).map_err(|e| Refusal::Io(io_reason(&e)))?;
+    if meta.is_dir() {
+        return Err(Refusal::Directory);
+    }
+    if !meta.is_file() {
+        return Err(Refusal::NotRegular(file_kind(&meta)));
+    }
+    if meta.len() > limit {
+        return Err(Refusal::TooLarge(Some(meta.len())));
+    }
+    use std::io::Read as _;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(limit.saturating_add(1)).read_to_end(&mut bytes))
+        .map_err(|e| Refusal::Io(io_reason(&e)))?;
+    if bytes.len() as u64 > limit {
+        return Err(Refusal::TooLarge(None));
+    }
+    Ok(bytes)
 }
 
 /// What a file that is not a regular file is.
