@@ -334,6 +334,9 @@ impl Simulation {
         self.cancel = flag;
     }
 
+    /// The most threads [`Simulation::set_threads`] starts.
+    pub const MAX_THREADS: usize = 256;
+
     /// Run the explicit step's material updates (the stress passes) on
     /// `threads` threads; 0 means one per core, 1 (the default) none. The
     /// results are the same to the bit whatever the count: each point is
@@ -345,6 +348,15 @@ impl Simulation {
         if threads == 1 {
             self.pool = None;
             return Ok(1);
+        }
+        // Threads are started one by one: a mistyped count (100000) would
+        // take minutes to start and nothing to use them.
+        if threads > Self::MAX_THREADS {
+            let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+            return Err(format!(
+                "{threads} threads is more than the {} this program starts (this machine has {cores} cores; 0 means one per core)",
+                Self::MAX_THREADS
+            ));
         }
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

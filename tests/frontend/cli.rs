@@ -286,6 +286,28 @@ fn record_cadence_flags_and_the_size_report() {
 }
 
 #[test]
+fn a_thread_count_beyond_what_is_started_is_refused_at_once() {
+    // Threads start one by one: 100000 took minutes before anything ran.
+    // Refused before the run, with the limit and the machine's cores; the
+    // limit itself is accepted.
+    let s = "scenarios/ghost-collision-elastic.toml";
+    let (code, _, err) = mpmlab(&["run", s, "--threads", "100000", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--threads: 100000 threads is more than the 256 this program starts"),
+        "{err}"
+    );
+    let (code, _, err) = mpmlab(&["tui", s, "--threads", "100000"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("more than the 256"), "{err}");
+    let mut sim = common::sim_with("ghost-collision-elastic", |_| {});
+    assert_eq!(
+        sim.set_threads(mpmlab::Simulation::MAX_THREADS),
+        Ok(mpmlab::Simulation::MAX_THREADS)
+    );
+}
+
+#[test]
 fn verify_runs_from_any_folder_with_the_scenes_built_in() {
     // Outside the checkout there is no ./scenarios: the quick set runs on
     // the copies built into the program, and says so; a --scenes folder
