@@ -93,6 +93,10 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
         ),
         (None, None) => anyhow::bail!("give a scene file, --preset NAME or --collect DIR"),
     };
+    if a.target.is_none() && !a.tries.is_empty() {
+        eprintln!("error: --try needs --target QUANTITY=VALUE (it sets where the target search starts)");
+        return Ok(ExitCode::from(2));
+    }
     if let Some(t) = &a.target {
         let mut tries = Vec::new();
         for t in &a.tries {
@@ -111,6 +115,10 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
     }
     if varies.is_empty() {
         anyhow::bail!("nothing to vary: give --vary KEY=V1,V2,...");
+    }
+    if let Some(e) = mpmlab::sweep::overlapping(&varies) {
+        eprintln!("error: {e}");
+        return Ok(ExitCode::from(2));
     }
     if a.estimate {
         let sizes = |v: &Vary| {

@@ -95,6 +95,31 @@ pub fn key_paths(key: &str) -> Vec<String> {
     p.iter().map(|s| s.to_string()).collect()
 }
 
+/// Two `--vary` that set the same field of the scene (`h` and `grid.h`,
+/// `ppc` and `body.0.points_per_cell`, a key given twice): the later
+/// would overwrite the earlier in every run while the table labels both,
+/// so they are refused, naming both and the field.
+pub fn overlapping(varies: &[Vary]) -> Option<String> {
+    let meets = |a: &str, b: &str| {
+        let (a, b): (Vec<&str>, Vec<&str>) = (a.split('.').collect(), b.split('.').collect());
+        a.len() == b.len() && a.iter().zip(&b).all(|(x, y)| x == y || *x == "*" || *y == "*")
+    };
+    for (i, a) in varies.iter().enumerate() {
+        for b in &varies[i + 1..] {
+            for pa in key_paths(&a.key) {
+                if let Some(pb) = key_paths(&b.key).into_iter().find(|pb| meets(&pa, pb)) {
+                    let field = if pa.contains('*') { pb } else { pa };
+                    return Some(format!(
+                        "--vary {} and --vary {} both set `{field}`: give it once, with all its values",
+                        a.key, b.key
+                    ));
+                }
+            }
+        }
+    }
+    None
+}
+
 /// Keys whose values are real numbers even when written without a point.
 const REAL: &[&str] = &[
     "h",
@@ -943,5 +968,20 @@ mod tests {
         assert_eq!(t["analysis"]["mass"].as_str(), Some("lumped"));
         assert!(apply(&mut t, "body.7.basis", "gimp").is_err());
         assert_eq!(Vary::parse("size=[1.0, 2.0],[3.0, 4.0]").unwrap().values.len(), 2);
+        // Two settings of one field are refused, by any spelling.
+        let v = |s: &str| Vary::parse(s).unwrap();
+        for (a, b, field) in [
+            ("h=0.5", "h=0.25", "grid.h"),
+            ("h=0.5", "grid.h=0.25", "grid.h"),
+            ("ppc=2", "body.0.points_per_cell=4", "body.0.points_per_cell"),
+            ("gamma_k=0,1e6", "analysis.gamma_k=1e3", "analysis.gamma_k"),
+        ] {
+            let e = overlapping(&[v(a), v(b)]).unwrap_or_else(|| panic!("{a} {b}"));
+            assert!(e.contains(&format!("`{field}`")), "{e}");
+        }
+        assert_eq!(
+            overlapping(&[v("h=0.5,0.25"), v("ppc=2,3"), v("body.0.basis=gimp")]),
+            None
+        );
     }
 }

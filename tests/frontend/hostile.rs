@@ -1755,6 +1755,21 @@ fn sweeps_reject_bad_settings_before_running() {
     let (code, _, err) = sweep(&["--vary", "h=0.5", "--jobs", "0"]);
     assert_eq!(code, 2);
     assert!(err.contains("--jobs"), "{err}");
+    // One field set twice (the later would win in every run, both labelled)
+    // and --try without --target (it was ignored): exit 2, nothing written.
+    for (args, fragment) in [
+        (&["--vary", "h=0.5", "--vary", "h=0.25"][..], "both set `grid.h`"),
+        (
+            &["--vary", "ppc=2", "--vary", "body.0.points_per_cell=4"][..],
+            "both set `body.0.points_per_cell`",
+        ),
+        (&["--vary", "h=0.5", "--try", "h=0.25"][..], "--try needs --target"),
+    ] {
+        let (code, o, err) = sweep(args);
+        assert_eq!(code, 2, "{args:?}: {o}{err}");
+        assert!(err.contains(fragment), "{args:?}: {err}");
+        assert!(!dir.exists(), "{args:?}: the sweep folder was written");
+    }
 
     // Emitted jobs carry absolute paths; collecting with none run fails
     // loudly; with one run, the missing one is named.
