@@ -137,8 +137,7 @@ fn translating_ghost_conditioning_and_velocity_mapping() {
     println!("max cond: stabilised {stab:.3e}, consistent {cons:.3e}, lumped {lump:.3e}; velocity error {worst_velocity:.2e}");
     // Stabilised: bounded (G: ~4e5; ours 2.7e2, see docs/verification.md,
     // our face set also covers cells only a GIMP domain reaches). Asserted
-    // below 1e3, a margin of 3.7 over the measured value (was 1e6): a
-    // gamma_M ten times too small gives 2.7e3.
+    // below 1e3, a margin of 3.7 over the measured value (was 1e6).
     assert!(stab < 1e3, "{stab:e}");
     // Unstabilised: beyond 1e20 at some positions. Most positions are
     // singular to working precision (the Cholesky breaks down with the
