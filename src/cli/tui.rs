@@ -15,7 +15,6 @@ use std::process::ExitCode;
 /// The scene opened by `mpmlab` with no arguments (also built in, so the
 /// command works from any directory).
 const DEFAULT_SCENE: &str = "scenarios/column-small-strain.toml";
-const DEFAULT_SCENE_TEXT: &str = include_str!("../../scenarios/column-small-strain.toml");
 
 /// `mpmlab tui`: exit 0 when the UI is left, 2 for bad arguments or
 /// scenes, 3 when the recording cannot be created.
@@ -80,9 +79,12 @@ fn open_scene(scene: Option<&Path>, limits: &Limits) -> Result<Result<(Simulatio
             };
             load(&path, limits)
         }
-        None => Simulation::from_scene_text(DEFAULT_SCENE_TEXT, DEFAULT_SCENE)
-            .map(|s| (s, DEFAULT_SCENE_TEXT.to_string()))
-            .map_err(|e| fail(2, e)),
+        None => match mpmlab::shipped::text("column-small-strain") {
+            Some(text) => Simulation::from_scene_text(text, DEFAULT_SCENE)
+                .map(|s| (s, text.to_string()))
+                .map_err(|e| fail(2, e)),
+            None => Err(fail(2, "the default scene is not built into this program")),
+        },
     })
 }
 

@@ -427,18 +427,7 @@ pub(super) fn g_dynamics(p: &mut Plan) {
         true,
         "G: below 1e-13 m; 1e-12 allows the round-off of 1000 steps",
         &["stretching"],
-        |o| {
-            o.run("stretching")
-                .reports
-                .iter()
-                .flat_map(|r| {
-                    r.errors
-                        .iter()
-                        .filter(|e| e.name == "displacement_max")
-                        .map(|e| e.value)
-                })
-                .fold(0.0, f64::max)
-        },
+        |o| largest_error(o.run("stretching"), "displacement_max"),
     );
     // G 5.2 Table 3: the elastic collision, USF, stabilised mass.
     for steps in [1000usize, 2000] {
@@ -476,6 +465,14 @@ pub(super) fn g_dynamics(p: &mut Plan) {
 fn corner_a_error(mp: &Outcome, fe: &Outcome) -> f64 {
     let (a, b) = (mp.boundary_point("", 2)[1], fe.boundary_point("", 2)[1]);
     ((a - b) / b).abs()
+}
+
+/// The largest value of the error `name` over every step of a run.
+fn largest_error(o: &Outcome, name: &str) -> f64 {
+    o.reports
+        .iter()
+        .flat_map(|r| r.errors.iter().filter(|e| e.name == name).map(|e| e.value))
+        .fold(0.0, f64::max)
 }
 
 /// G 5.2's mean energy error `(1/(nt W0)) sum |W_kin + W_eps - W0|`.
@@ -562,18 +559,7 @@ pub(super) fn newmark(p: &mut Plan) {
         true,
         "G: below 1e-13 m explicitly; exact to round-off",
         &["stretching-implicit"],
-        |o| {
-            o.run("stretching-implicit")
-                .reports
-                .iter()
-                .flat_map(|r| {
-                    r.errors
-                        .iter()
-                        .filter(|e| e.name == "displacement_max")
-                        .map(|e| e.value)
-                })
-                .fold(0.0, f64::max)
-        },
+        |o| largest_error(o.run("stretching-implicit"), "displacement_max"),
     );
     // G 5.2 at ten times the explicit step (100 steps over 3.5 s).
     p.run("collision-implicit", "ghost-collision-implicit", |_| {});
