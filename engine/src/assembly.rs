@@ -532,6 +532,30 @@ impl Pattern {
         Ok(SparseColMat::new(symbolic, values))
     }
 
+    /// Add the scalar block `kb` (row-major `m x m` over `nodes`) into
+    /// `values` of this pattern, built on a scalar numbering `dofs` (its
+    /// x component the unknown, [`Pattern::new`] of the same blocks):
+    /// rows and columns of nodes without a free unknown are skipped.
+    pub fn add_scalar_block(&self, dofs: &DofMap, nodes: &[usize], kb: &[f64], values: &mut [f64]) {
+        let ri = self.symbolic.row_idx();
+        let m = nodes.len();
+        for (c, &nc) in nodes.iter().enumerate() {
+            let Dof::Free(col) = dofs.node_dof[nc][0] else { continue };
+            let range = self.symbolic.col_range(col);
+            let column = &ri[range.clone()];
+            for (r, &nr) in nodes.iter().enumerate() {
+                if let Dof::Free(row) = dofs.node_dof[nr][0] {
+                    if self.storage == Storage::Full || row >= col {
+                        let k = column
+                            .binary_search(&(row as Ix))
+                            .expect("the pattern holds every block entry");
+                        values[range.start + k] += kb[r * m + c];
+                    }
+                }
+            }
+        }
+    }
+
     /// Assemble from dense blocks: `fill(b, out)` writes block `b`'s
     /// row-major `2m x 2m` matrix into `out` (resized by the caller's
     /// closure). Returns the reduced matrix's values, one per stored entry

@@ -230,8 +230,20 @@ pub fn cholesky_within(a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorEr
 /// and 10^6 unknowns. Every shipped scene prints the same numbers either
 /// way; larger systems may differ at round-off.
 pub fn cholesky_symbolic(a: SparseRef<'_>) -> Result<CholeskySymbolic, FactorError> {
+    cholesky_symbolic_relaxed(a, false)
+}
+
+/// [`cholesky_symbolic`], with faer's default merging of small supernodes
+/// when `relaxed`: the implicit dynamic step's scalar mass (GIMP block of
+/// 65,536 points, two parts of 16,500 unknowns) factorises in 33 instead
+/// of 41 ms that way.
+pub fn cholesky_symbolic_relaxed(a: SparseRef<'_>, relaxed: bool) -> Result<CholeskySymbolic, FactorError> {
     let params = CholeskySymbolicParams {
-        supernodal_params: SymbolicSupernodalParams { relax: None },
+        supernodal_params: if relaxed {
+            SymbolicSupernodalParams::default()
+        } else {
+            SymbolicSupernodalParams { relax: None }
+        },
         ..Default::default()
     };
     factorize_symbolic_cholesky(a.symbolic(), Side::Lower, Default::default(), params)

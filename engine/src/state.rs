@@ -546,6 +546,9 @@ pub(crate) fn check_points(
 #[derive(Default)]
 pub(crate) struct MassCache {
     pub(crate) key: Vec<Vec<usize>>,
+    /// Whether the symbolic analyses merge small supernodes
+    /// ([`crate::linalg::cholesky_symbolic_relaxed`]): part of the key.
+    pub(crate) relaxed: bool,
     /// Per scalar part of the mass (one, or one per component), its
     /// pattern and symbolic Cholesky; empty before the first step.
     pub(crate) parts: Vec<(crate::assembly::Pattern, crate::linalg::CholeskySymbolic)>,

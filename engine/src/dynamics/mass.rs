@@ -71,6 +71,29 @@ impl MassSolver {
         x
     }
 
+    /// `x_k = M^-1 b_k` for every right-hand side (free dofs), each part
+    /// solved once for all of them as columns of one matrix.
+    fn solve_many(&self, bs: &[&[f64]]) -> Vec<Vec<f64>> {
+        let parts = match self {
+            MassSolver::Lumped(_) => return bs.iter().map(|b| self.solve(b)).collect(),
+            MassSolver::Consistent(parts) => parts,
+        };
+        let mut xs: Vec<Vec<f64>> = bs.iter().map(|b| vec![0.0; b.len()]).collect();
+        for part in parts {
+            let (n, nc) = (part.matrix.nrows(), part.components.len());
+            let mut rhs = faer::Mat::<f64>::from_fn(n, nc * bs.len(), |i, j| bs[j / nc][part.components[j % nc][i]]);
+            part.factor.solve_in_place(&mut rhs);
+            for (k, x) in xs.iter_mut().enumerate() {
+                for (j, dofs) in part.components.iter().enumerate() {
+                    for (i, &d) in dofs.iter().enumerate() {
+                        x[d] = rhs[(i, k * nc + j)];
+                    }
+                }
+            }
+        }
+        xs
+    }
+
     /// The lumped diagonal's buffer, to be reused by the next step.
     pub(super) fn into_lumped(self) -> Option<Vec<f64>> {
         match self {
@@ -205,6 +228,7 @@ pub(super) fn consistent_mass(
 fn analyse_parts(
     parts: &[(DofMap, Vec<Vec<usize>>)],
     blocks: &[&[usize]],
+    relaxed: bool,
 ) -> Result<Vec<(Pattern, linalg::CholeskySymbolic)>, linalg::FactorError> {
     parts
         .iter()
@@ -212,10 +236,62 @@ fn analyse_parts(
             // The symbolic factorisation reads the structure alone.
             let pattern = Pattern::new(dofs, blocks, Storage::Lower)?;
             let zeros = crate::assembly::try_filled(pattern.nnz(), 0.0, "the values of the mass matrix")?;
-            let symbolic = linalg::cholesky_symbolic(pattern.matrix(&zeros))?;
+            let symbolic = linalg::cholesky_symbolic_relaxed(pattern.matrix(&zeros), relaxed)?;
             Ok((pattern, symbolic))
         })
         .collect()
+}
+
+/// The values of `M_s + gamma_m J_G` on each scalar part's pattern, in one
+/// pass over the point groups: a group's scalar block `sum_p m_p S_a S_b`
+/// (`masses` per point, weights from the step's stencils, as the inertia
+/// block of the tangent has them) is formed once and added to every part;
+/// then the ghost faces' (their x-x entries: `J_G` is `J_s (x) I_2`).
+fn scalar_mass_values(
+    map: &Mapping,
+    parts: &[(DofMap, Vec<Vec<usize>>)],
+    analyses: &[(Pattern, linalg::CholeskySymbolic)],
+    faces: &[GhostFace],
+    masses: &[f64],
+    gamma_m: f64,
+) -> Result<Vec<Vec<f64>>, linalg::FactorError> {
+    let mut values = analyses
+        .iter()
+        .map(|(p, _)| crate::assembly::try_filled(p.nnz(), 0.0, "the values of the mass matrix"))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (mut kb, mut w) = (Vec::new(), Vec::new());
+    let add = |nodes: &[usize], kb: &[f64], values: &mut [Vec<f64>]| {
+        for (((dofs, _), (pattern, _)), v) in parts.iter().zip(analyses).zip(values.iter_mut()) {
+            pattern.add_scalar_block(dofs, nodes, kb, v);
+        }
+    };
+    for g in &map.groups {
+        let m = g.nodes.len();
+        kb.clear();
+        kb.resize(m * m, 0.0);
+        for &p in &g.points {
+            let st = map.stencils.get(p);
+            debug_assert_eq!(st.len(), m);
+            w.clear();
+            w.extend((0..m).map(|a| st.w(a)));
+            for a in 0..m {
+                let wa = masses[p] * w[a];
+                for (k, wc) in kb[a * m..(a + 1) * m].iter_mut().zip(&w) {
+                    *k += wa * wc;
+                }
+            }
+        }
+        add(&g.nodes, &kb, &mut values);
+    }
+    let mut k2 = Vec::new();
+    for f in faces {
+        f.stiffness(gamma_m, &mut k2);
+        let m = f.nodes.len();
+        kb.clear();
+        kb.extend((0..m * m).map(|i| k2[(2 * (i / m)) * 2 * m + 2 * (i % m)]));
+        add(&f.nodes, &kb, &mut values);
+    }
+    Ok(values)
 }
 
 /// Assemble `M_s + gamma_m J_G` of each scalar part on its analysis and
@@ -315,6 +391,11 @@ fn scatter(map: &Mapping, free: &[f64]) -> Vec<P2> {
 /// Grid velocities on the free dofs from point masses and velocities:
 /// `M v = sum_p m_p S_p^T v_p` (G (10)).
 fn map_velocities(map: &Mapping, mass: &MassSolver, masses: &[f64], velocities: &[P2]) -> Vec<f64> {
+    mass.solve(&momentum(map, masses, velocities))
+}
+
+/// `sum_p m_p S_p^T v_p` on the free dofs.
+fn momentum(map: &Mapping, masses: &[f64], velocities: &[P2]) -> Vec<f64> {
     let mut momentum = vec![[0.0; 2]; map.dofs.node_dof.len()];
     for (p, s) in map.stencils.iter().enumerate() {
         for (n, w, _) in s.iter() {
@@ -322,7 +403,7 @@ fn map_velocities(map: &Mapping, mass: &MassSolver, masses: &[f64], velocities: 
             momentum[n][1] += w * masses[p] * velocities[p][1];
         }
     }
-    mass.solve(&gather(map, &momentum))
+    gather(map, &momentum)
 }
 
 /// A step's mass on the free dofs of its mapping, factorised: what maps
@@ -349,22 +430,42 @@ impl GridMass {
         let faces = if kind == MassKind::Stabilised { faces } else { &[] };
         let blocks = blocks_of(map, faces);
         let parts = scalar_parts(&map.dofs);
-        let points = PointsOnGrid::of(sim);
-        let (cache, _) = analysed(sim, &parts, &blocks)?;
-        let parts = factorise_parts(map, parts, &cache.parts, &blocks, faces, &points, gamma_m, budget)?;
+        let (cache, _) = analysed(sim, &parts, &blocks, true)?;
+        let values = scalar_mass_values(map, &parts, &cache.parts, faces, &sim.state.points.mass, gamma_m)?;
+        let parts = parts
+            .into_iter()
+            .zip(&cache.parts)
+            .zip(values)
+            .map(|(((_, components), (pattern, symbolic)), values)| {
+                let matrix = pattern.owned_matrix(values)?;
+                let factor = linalg::cholesky_with(symbolic, matrix.as_ref(), budget)?;
+                Ok(ScalarMass {
+                    factor,
+                    matrix,
+                    components,
+                })
+            })
+            .collect::<Result<Vec<_>, linalg::FactorError>>()?;
         Ok(GridMass(MassSolver::Consistent(parts)))
     }
 
     /// `M x = sum_p m_p S_p^T f_p` for the point field `field` (per
-    /// point): `x` per grid node, zero where a component is held or
-    /// inactive.
-    pub(crate) fn map_points(&self, map: &Mapping, masses: &[f64], field: &[P2]) -> Vec<P2> {
-        scatter(map, &map_velocities(map, &self.0, masses, field))
-    }
-
-    /// `M x = b` for `b` on the free dofs: `x` per grid node.
-    pub(crate) fn solve(&self, map: &Mapping, b: &[f64]) -> Vec<P2> {
-        scatter(map, &self.0.solve(b))
+    /// point) and `M y = b` for `b` on the free dofs, in one solve with
+    /// two right-hand sides: `x` and `y` per grid node, zero where a
+    /// component is held or inactive.
+    pub(crate) fn map_points_and_solve(
+        &self,
+        map: &Mapping,
+        masses: &[f64],
+        field: &[P2],
+        b: &[f64],
+    ) -> (Vec<P2>, Vec<P2>) {
+        let p = momentum(map, masses, field);
+        let mut xs = self.0.solve_many(&[&p, b]).into_iter().map(|x| scatter(map, &x));
+        let (Some(x), Some(y)) = (xs.next(), xs.next()) else {
+            unreachable!("two right-hand sides give two solutions")
+        };
+        (x, y)
     }
 }
 
@@ -376,18 +477,21 @@ fn analysed<'s>(
     sim: &'s Simulation,
     parts: &[(DofMap, Vec<Vec<usize>>)],
     blocks: &[&[usize]],
+    relaxed: bool,
 ) -> Result<(std::sync::MutexGuard<'s, MassCache>, bool), linalg::FactorError> {
     // A panic while the cache was held left it whole or stale, never
     // half-written: it is reset below when its key does not match.
     let mut cache = sim.mass_cache.lock().unwrap_or_else(|e| e.into_inner());
     let reused = cache.parts.len() == parts.len()
+        && cache.relaxed == relaxed
         && cache.key.len() == blocks.len()
         && cache.key.iter().zip(blocks).all(|(k, b)| k.as_slice() == *b);
     if !reused {
         *cache = MassCache::default();
-        let parts = analyse_parts(parts, blocks)?;
+        let parts = analyse_parts(parts, blocks, relaxed)?;
         *cache = MassCache {
             key: blocks.iter().map(|b| b.to_vec()).collect(),
+            relaxed,
             parts,
         };
     }
@@ -407,7 +511,7 @@ pub(super) fn factorise_mass(
 ) -> Result<(MassSolver, bool), StepFailure> {
     let blocks = blocks_of(map, faces);
     let parts = scalar_parts(&map.dofs);
-    let (cache, reused) = analysed(sim, &parts, &blocks).map_err(|e| match e {
+    let (cache, reused) = analysed(sim, &parts, &blocks, false).map_err(|e| match e {
         e @ linalg::FactorError::Memory { .. } => e.at_step(step),
         e => StepFailure::Singular {
             step,
@@ -470,7 +574,7 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
         let blocks = blocks_of(&map, &faces);
         let parts = scalar_parts(&map.dofs);
         let points = PointsOnGrid::of(sim);
-        let analyses = analyse_parts(&parts, &blocks).map_err(|e| e.to_string())?;
+        let analyses = analyse_parts(&parts, &blocks, false).map_err(|e| e.to_string())?;
         let gamma = sim.params.gamma_m;
         MassSolver::Consistent(
             factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX)
@@ -543,7 +647,7 @@ mass = "stabilised"
             let gamma = sim.params.gamma_m;
             let parts = scalar_parts(&map.dofs);
             assert_eq!(parts.len(), if roller { 2 } else { 1 });
-            let analyses = analyse_parts(&parts, &blocks).unwrap();
+            let analyses = analyse_parts(&parts, &blocks, false).unwrap();
             let solver = MassSolver::Consistent(
                 factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX).unwrap(),
             );

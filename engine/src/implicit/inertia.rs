@@ -178,8 +178,7 @@ impl Inertia {
                 other => other,
             }
         })?;
-        let v0 = grid_mass.map_points(map, &pts.mass, &pts.v);
-        let mut a0 = grid_mass.solve(map, r);
+        let (v0, mut a0) = grid_mass.map_points_and_solve(map, &pts.mass, &pts.v, r);
         if !previous.is_empty() && scheme.alpha != 0.0 {
             let alpha = scheme.alpha;
             for (a, p) in a0.iter_mut().zip(previous) {
@@ -385,31 +384,40 @@ impl Contribution for std::rc::Rc<Inertia> {
         // A group's points share one stencil node list, the group's
         // (`assembly::groups`): a stencil's index is the block's.
         let g = &map.groups[k];
-        let m2 = 2 * g.nodes.len();
-        out.clear();
-        out.resize(m2 * m2, 0.0);
+        let n = g.nodes.len();
+        let m2 = 2 * n;
+        // The scalar block `sum_p m_p c0 S_a S_b` (the lumped mass: its
+        // diagonal), then `(x) I_2`.
+        let mut scalar = vec![0.0; n * n];
+        let mut w = Vec::with_capacity(n);
         for &p in &g.points {
             let m = pts.mass[p] * c0;
             if m == 0.0 {
                 continue;
             }
             let st = map.stencils.get(p);
-            debug_assert_eq!(st.len(), g.nodes.len());
-            for a in 0..st.len() {
-                let wa = m * st.w(a);
+            debug_assert_eq!(st.len(), n);
+            w.clear();
+            w.extend((0..n).map(|a| st.w(a)));
+            for a in 0..n {
+                let wa = m * w[a];
                 match self.mass.kind {
-                    MassKind::Lumped => {
-                        out[2 * a * m2 + 2 * a] += wa;
-                        out[(2 * a + 1) * m2 + 2 * a + 1] += wa;
-                    }
+                    MassKind::Lumped => scalar[a * n + a] += wa,
                     _ => {
-                        for b in 0..st.len() {
-                            let v = wa * st.w(b);
-                            out[2 * a * m2 + 2 * b] += v;
-                            out[(2 * a + 1) * m2 + 2 * b + 1] += v;
+                        for (s, wb) in scalar[a * n..(a + 1) * n].iter_mut().zip(&w) {
+                            *s += wa * wb;
                         }
                     }
                 }
+            }
+        }
+        out.clear();
+        out.resize(m2 * m2, 0.0);
+        for a in 0..n {
+            for b in 0..n {
+                let v = scalar[a * n + b];
+                out[2 * a * m2 + 2 * b] = v;
+                out[(2 * a + 1) * m2 + 2 * b + 1] = v;
             }
         }
         Ok(())

@@ -59,8 +59,65 @@ pub(crate) struct Assembly {
     /// the factorisation.
     pub symmetry: Symmetry,
     pub pattern: Pattern,
-    /// Each block of the pattern: its contribution and its index there.
-    blocks: Vec<(usize, usize)>,
+    /// The pattern's blocks: [`Merged`].
+    blocks: Merged,
+}
+
+/// The pattern's blocks, one per distinct node list: contributions whose
+/// blocks are the same list (the same slice, as the inertia's and the
+/// points' are the point groups') are summed into one block before it is
+/// scattered, which halves the scatter of a dynamic step's tangent.
+struct Merged {
+    /// How many blocks the contributions have in all.
+    total: usize,
+    /// Per pattern block, the index of its first member among all blocks.
+    first: Vec<usize>,
+    /// Per pattern block `b`, its members `members[start[b]..start[b +
+    /// 1]]`: (contribution, its block index), in the list's order.
+    start: Vec<usize>,
+    members: Vec<(usize, usize)>,
+}
+
+impl Merged {
+    /// The pattern's blocks of `own` (per contribution, its node lists).
+    fn new(own: &[Vec<&[usize]>]) -> Merged {
+        let mut seen: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
+        let mut first = Vec::new();
+        let mut of = Vec::new();
+        let mut total = 0;
+        for (c, blocks) in own.iter().enumerate() {
+            for (k, nodes) in blocks.iter().enumerate() {
+                // Identity, not content: one slice of one frame.
+                let key = (nodes.as_ptr() as usize, nodes.len());
+                let b = *seen.entry(key).or_insert_with(|| {
+                    first.push(total);
+                    first.len() - 1
+                });
+                of.push((b, c, k));
+                total += 1;
+            }
+        }
+        // Stable: members keep the list's order within a block.
+        of.sort_by_key(|m| m.0);
+        let mut start = vec![0; first.len() + 1];
+        for m in &of {
+            start[m.0 + 1] += 1;
+        }
+        for b in 0..first.len() {
+            start[b + 1] += start[b];
+        }
+        Merged {
+            total,
+            first,
+            start,
+            members: of.into_iter().map(|(_, c, k)| (c, k)).collect(),
+        }
+    }
+
+    /// The node lists of the pattern's blocks from every block `all`.
+    fn nodes<'a>(&self, all: &[&'a [usize]]) -> Vec<&'a [usize]> {
+        self.first.iter().map(|&i| all[i]).collect()
+    }
 }
 
 impl Assembly {
@@ -75,15 +132,11 @@ impl Assembly {
             Symmetry::Symmetric => Storage::Lower,
             Symmetry::General => Storage::Full,
         };
-        let mut blocks = Vec::new();
-        let mut nodes: Vec<&[usize]> = Vec::new();
-        for (c, contribution) in list.iter().enumerate() {
-            let own = contribution.blocks(frame);
-            blocks.extend((0..own.len()).map(|k| (c, k)));
-            nodes.extend(own);
-        }
-        let pattern = Pattern::new(&frame.map.dofs, &nodes, storage).map_err(|e| e.at_step(frame.step))?;
-        drop(nodes);
+        let own: Vec<Vec<&[usize]>> = list.iter().map(|c| c.blocks(frame)).collect();
+        let blocks = Merged::new(&own);
+        let all: Vec<&[usize]> = own.into_iter().flatten().collect();
+        let pattern = Pattern::new(&frame.map.dofs, &blocks.nodes(&all), storage).map_err(|e| e.at_step(frame.step))?;
+        drop(all);
         Ok(Assembly {
             list,
             symmetry,
@@ -102,29 +155,45 @@ impl Assembly {
     /// prescribed increments.
     pub fn stiffness(&self, at: &At) -> Result<(Vec<f64>, Vec<f64>), StepFailure> {
         let frame = at.frame;
-        let nodes: Vec<&[usize]> = self.list.iter().flat_map(|c| c.blocks(frame)).collect();
+        let all: Vec<&[usize]> = self.list.iter().flat_map(|c| c.blocks(frame)).collect();
+        if all.len() != self.blocks.total {
+            return Err(StepFailure::Internal {
+                step: frame.step,
+                message: "a contribution's blocks changed within the step".into(),
+            });
+        }
+        let nodes = self.blocks.nodes(&all);
         let mut failure = None;
+        let mut more = Vec::new();
         let assembled = self.pattern.assemble_with(&frame.map.dofs, &nodes, |b, out| {
-            let (c, k) = self.blocks[b];
             let m2 = 2 * nodes[b].len();
-            if let Err(e) = self.list[c].block(k, at, out) {
-                failure.get_or_insert(e);
-                out.clear();
-            }
-            // A block of the wrong size is a bug of its contribution: a
-            // failure naming it, not a panic in the assembly.
-            if out.len() != m2 * m2 {
-                failure.get_or_insert(StepFailure::Internal {
-                    step: frame.step,
-                    message: format!(
-                        "the {} contribution's block {k} has {} values for {} nodes",
-                        self.list[c].name(),
-                        out.len(),
-                        m2 / 2
-                    ),
-                });
-                out.clear();
-                out.resize(m2 * m2, 0.0);
+            let members = &self.blocks.members[self.blocks.start[b]..self.blocks.start[b + 1]];
+            for (i, &(c, k)) in members.iter().enumerate() {
+                let into = if i == 0 { &mut *out } else { &mut more };
+                if let Err(e) = self.list[c].block(k, at, into) {
+                    failure.get_or_insert(e);
+                    into.clear();
+                }
+                // A block of the wrong size is a bug of its contribution: a
+                // failure naming it, not a panic in the assembly.
+                if into.len() != m2 * m2 {
+                    failure.get_or_insert(StepFailure::Internal {
+                        step: frame.step,
+                        message: format!(
+                            "the {} contribution's block {k} has {} values for {} nodes",
+                            self.list[c].name(),
+                            into.len(),
+                            m2 / 2
+                        ),
+                    });
+                    into.clear();
+                    into.resize(m2 * m2, 0.0);
+                }
+                if i > 0 {
+                    for (o, v) in out.iter_mut().zip(&more) {
+                        *o += v;
+                    }
+                }
             }
         });
         match (failure, assembled) {
