@@ -18,6 +18,8 @@ use std::path::{Path, PathBuf};
 /// Writes the step table of a run to a CSV file, as an observer.
 pub struct CsvWriter {
     path: PathBuf,
+    /// The table's temporary file until [`CsvWriter::finish`].
+    staged: Option<crate::output::Staged>,
     out: std::io::BufWriter<std::fs::File>,
     units: Units,
     /// The probes at the start (the first row, written with the header),
@@ -28,11 +30,21 @@ pub struct CsvWriter {
 }
 
 impl CsvWriter {
-    /// Create `path` (overwriting it) for the run of `sim`, at its start.
-    pub fn create(path: &Path, sim: &Simulation) -> Result<CsvWriter, String> {
-        let file = std::fs::File::create(path).map_err(|e| format!("cannot write CSV file {}: {e}", path.display()))?;
+    /// Start the table of the run of `sim` for `path`: written as
+    /// `path.partial` (locked: one run at a time) and renamed to `path` by
+    /// [`CsvWriter::finish`] ([`crate::output`]); `force` replaces a
+    /// `.partial` an earlier run left.
+    pub fn create(path: &Path, sim: &Simulation, force: bool) -> Result<CsvWriter, String> {
+        let staged =
+            crate::output::Staged::claim(path, force).map_err(|e| format!("CSV file {}: {e}", path.display()))?;
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .truncate(true)
+            .open(staged.partial())
+            .map_err(|e| format!("cannot write CSV file {}: {e}", staged.partial().display()))?;
         Ok(CsvWriter {
             path: path.to_path_buf(),
+            staged: Some(staged),
             out: std::io::BufWriter::new(file),
             units: sim.model().units,
             initial: Some(sim.probe_values(None)),
@@ -43,6 +55,35 @@ impl CsvWriter {
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Remove the table's temporary file: the run never started, and the
+    /// file at its path stays as it was.
+    pub fn discard(mut self) {
+        if let Some(s) = self.staged.take() {
+            s.discard();
+        }
+    }
+
+    /// The table into place: flushed, then renamed from its `.partial`
+    /// file to its path. A table of a run that never got here stays as
+    /// `.partial`, with every row written so far.
+    pub fn finish(mut self) -> Result<(), String> {
+        let partial = self.staged.as_ref().map(|s| s.partial().display().to_string());
+        self.out
+            .flush()
+            .and_then(|()| self.out.get_ref().sync_all())
+            .map_err(|e| {
+                format!(
+                    "cannot write CSV file {}: {e} (the rows written are in {})",
+                    self.path.display(),
+                    partial.unwrap_or_default()
+                )
+            })?;
+        match self.staged.take() {
+            Some(s) => s.commit(),
+            None => Ok(()),
+        }
     }
 
     fn write_row(&mut self, r: &StepReport) -> std::io::Result<()> {

@@ -5,8 +5,9 @@
 //! (`mpmlab::scene`, `mpmlab::Simulation`, ...). This crate holds what
 //! follows a run: the terminal UI ([`tui`]), the rerun recorder
 //! ([`record`]), the ParaView series ([`vtk`]), the probes' CSV files
-//! ([`csv`]) and parameter sweeps ([`sweep`]), with the formatters they
-//! share ([`format`]). They only read reports and state through
+//! ([`csv`]), how output files are written safely ([`output`]) and
+//! parameter sweeps ([`sweep`]), with the formatters they share
+//! ([`format`]). They only read reports and state through
 //! [`runner::Observer`]; the engine cannot import them (it does not depend
 //! on this crate or its libraries).
 
@@ -17,6 +18,7 @@ pub use mpmlab_engine::*;
 pub mod colormap;
 pub mod csv;
 pub mod format;
+pub mod output;
 pub mod record;
 pub mod shipped;
 pub mod sweep;

@@ -258,7 +258,7 @@ impl VtkExport {
 impl Observer for VtkExport {
     fn stepped(&mut self, sim: &Simulation, _report: &StepReport) -> Option<String> {
         let step = sim.step_index();
-        if step % self.every != 0 && !sim.finished() {
+        if !step.is_multiple_of(self.every) && !sim.finished() {
             return None;
         }
         self.write_state(sim).err().map(|e| e.to_string())

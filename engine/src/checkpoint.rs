@@ -203,7 +203,7 @@ impl Checkpointer {
 
 impl crate::runner::Observer for Checkpointer {
     fn stepped(&mut self, sim: &Simulation, r: &crate::simulation::StepReport) -> Option<String> {
-        if r.step % self.every == 0 || sim.finished() {
+        if r.step.is_multiple_of(self.every) || sim.finished() {
             return self.write(sim).err().map(|e| e.to_string());
         }
         None

@@ -86,7 +86,7 @@ pub(crate) fn next_step(sim: &Simulation) -> (Interval, Drive) {
 /// for step 1), as in explicit dynamics.
 fn mass_conditioning(sim: &Simulation, step: usize) -> Result<Option<Conditioning>, StepFailure> {
     let every = sim.model.analysis.condition_every;
-    let asked = sim.params.condition != ConditionMode::Off && every > 0 && (step % every == 0 || step == 1);
+    let asked = sim.params.condition != ConditionMode::Off && every > 0 && (step.is_multiple_of(every) || step == 1);
     if !asked {
         return Ok(None);
     }

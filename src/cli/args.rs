@@ -232,8 +232,9 @@ impl RecordArgs {
         text: &str,
         sim: &Simulation,
         settings: mpmlab::model::record::RecordSettings,
+        force: bool,
     ) -> Result<Recorder, mpmlab::record::RecordError> {
-        let mut r = Recorder::create_with(path, text, sim, false, settings)?;
+        let mut r = Recorder::create_with(path, text, sim, false, settings, force)?;
         if let Some(p) = self.record_sync {
             r.set_sync_period(p);
         }

@@ -4,9 +4,10 @@
 use std::path::Path;
 
 /// Whether `record` may be written: not the scene itself, not a
-/// directory, and, when it exists and is not empty, a rerun recording
-/// (its first bytes `RRF0`..`RRF2`) unless `force`. Refusals are bad
-/// arguments (exit 2); nothing has been written.
+/// directory or a special file (`--force` or not), and, when it exists
+/// and is not empty, a rerun recording (its first bytes `RRF0`..`RRF2`)
+/// unless `force`. Refusals are bad arguments (exit 2); nothing has been
+/// written.
 pub fn check_record_target(record: &Path, scene: Option<&Path>, force: bool) -> Result<(), String> {
     check_output_target("--record", record, scene, force, "a rerun recording", "run.rrd", is_rrd)
 }
@@ -24,8 +25,9 @@ pub fn is_rrd(magic: &[u8]) -> bool {
 }
 
 /// Whether the output file `path` of option `flag` may be written: not
-/// the scene itself, not a directory, and, when it exists and is not
-/// empty, a file of its kind (`ours` of its first bytes) unless `force`.
+/// the scene itself (by identity), not a directory or a special file,
+/// and, when it exists and is not empty, a file of its kind (`ours` of
+/// its first bytes) unless `force`.
 pub fn check_output_target(
     flag: &str,
     path: &Path,
@@ -35,14 +37,12 @@ pub fn check_output_target(
     example: &str,
     ours: impl Fn(&[u8]) -> bool,
 ) -> Result<(), String> {
-    let same = |a: &Path, b: &Path| match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
+    // The scene by identity (through `./`, symlinks, hard links), and
+    // never replaced, --force or not.
     if let Some(scene) = scene {
-        if same(path, scene) && !force {
+        if mpmlab::output::same_file(path, scene) {
             return Err(format!(
-                "{flag} {} is the scene file itself; give another path",
+                "{flag} {} is the scene file itself; give another path (--force never replaces the scene)",
                 path.display()
             ));
         }
@@ -57,14 +57,12 @@ pub fn check_output_target(
             path.join(example).display()
         ));
     }
+    // Devices, FIFOs and sockets are never replaced.
+    if let Some(why) = mpmlab::output::not_replaceable(path) {
+        return Err(format!("{flag} {why}"));
+    }
     if force {
         return Ok(());
-    }
-    if !meta.is_file() {
-        return Err(format!(
-            "{flag} {} exists and is not a regular file; refusing to write to it (--force to do so anyway)",
-            path.display()
-        ));
     }
     let mut magic = [0u8; 8];
     use std::io::Read as _;

@@ -9,11 +9,7 @@ use std::process::ExitCode;
 /// whole, 3 OUT cannot be written.
 pub fn repair(input: &Path, output: &Path, force: bool) -> ExitCode {
     use mpmlab::record::repair::RepairError;
-    let same = matches!(
-        (std::fs::canonicalize(input), std::fs::canonicalize(output)),
-        (Ok(a), Ok(b)) if a == b
-    );
-    if same {
+    if mpmlab::output::same_file(input, output) {
         eprintln!(
             "error: the output {} is the input itself; give another path (the input is left as it is)",
             output.display()

@@ -42,7 +42,7 @@ fn check_args(args: &RunArgs) -> Result<(), ExitCode> {
     }
     if let Some(c) = &args.csv {
         check_csv_target(c, Some(path), force).map_err(|e| fail(2, e))?;
-        if record.is_some_and(|r| r == c.as_path()) {
+        if record.is_some_and(|r| mpmlab::output::same_file(r, c)) {
             return Err(fail(2, "--csv and --record name the same file"));
         }
     }
@@ -112,7 +112,10 @@ impl Outputs {
         let settings = args.cadence.settings(sim).map_err(|e| fail(2, e))?;
         let recorder = match &args.record {
             Some(p) => {
-                let r = args.cadence.create(p, text, sim, settings).map_err(|e| fail(3, e))?;
+                let r = args
+                    .cadence
+                    .create(p, text, sim, settings, args.force)
+                    .map_err(|e| fail(3, e))?;
                 if let Some(f) = &args.resume {
                     let _ = r.event(
                         &format!("resumed from checkpoint {} at step {}", f.display(), sim.step_index()),
@@ -124,10 +127,30 @@ impl Outputs {
             None => None,
         };
         let csv = match &args.csv {
-            Some(p) => Some(CsvWriter::create(p, sim).map_err(|e| fail(3, e))?),
+            Some(p) => match CsvWriter::create(p, sim, args.force) {
+                Ok(c) => Some(c),
+                Err(e) => {
+                    // Nothing was recorded yet: the old file stays.
+                    if let Some(r) = recorder {
+                        r.discard();
+                    }
+                    return Err(fail(3, e));
+                }
+            },
             None => None,
         };
-        let vtk = args.vtk.open(sim)?;
+        let vtk = match args.vtk.open(sim) {
+            Ok(v) => v,
+            Err(code) => {
+                if let Some(r) = recorder {
+                    r.discard();
+                }
+                if let Some(c) = csv {
+                    c.discard();
+                }
+                return Err(code);
+            }
+        };
         Ok(Outputs {
             checkpoints,
             recorder,
@@ -150,8 +173,12 @@ impl Outputs {
                 );
             }
         }
-        if let Some(c) = &self.csv {
-            out!("step table: {}", c.path().display());
+        if let Some(c) = self.csv {
+            let p = c.path().display().to_string();
+            match c.finish() {
+                Ok(()) => out!("step table: {p}"),
+                Err(e) => *code = fail(3, e),
+            }
         }
         if let Some(rec) = self.recorder {
             finish_recording(rec, sim, code);

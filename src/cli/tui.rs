@@ -104,7 +104,7 @@ fn open_recorder(a: &TuiArgs, sim: &Simulation, text: &str) -> Result<Result<Rec
         Ok(s) => s,
         Err(e) => return Ok(Err(fail(2, e))),
     };
-    let r = match a.cadence.create(&path, text, sim, settings) {
+    let r = match a.cadence.create(&path, text, sim, settings, a.force) {
         Ok(r) => r,
         Err(e) => return Ok(Err(fail(3, e))),
     };

@@ -464,7 +464,10 @@ fn contents(sim: &Simulation, colour: Field) -> Contents {
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
+    /// The recording's path as given; it is written as `staged`'s
+    /// `.partial` file until [`Recorder::finish`].
     path: PathBuf,
+    staged: Option<crate::output::Staged>,
     iteration: i64,
     field: Field,
     settings: RecordSettings,
@@ -533,16 +536,19 @@ impl Recorder {
         sim: &Simulation,
         deterministic: bool,
     ) -> Result<Recorder, RecordError> {
-        Self::create_with(path, scene_text, sim, deterministic, sim.model().record.clone())
+        Self::create_with(path, scene_text, sim, deterministic, sim.model().record.clone(), false)
     }
 
-    /// [`Recorder::create`] with other settings (the command line's).
+    /// [`Recorder::create`] with other settings (the command line's);
+    /// `force` replaces a `.partial` file an earlier run left
+    /// ([`crate::output::Staged::claim`]).
     pub fn create_with(
         path: &Path,
         scene_text: &str,
         sim: &Simulation,
         deterministic: bool,
         settings: RecordSettings,
+        force: bool,
     ) -> Result<Recorder, RecordError> {
         let err = |m: String| RecordError::Create {
             path: path.to_path_buf(),
@@ -553,9 +559,15 @@ impl Recorder {
                 return Err(err(format!("directory {} does not exist", dir.display())));
             }
         }
-        // Fail early and clearly on an unwritable path (the file sink would
-        // only report it from its writer thread).
-        std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
+        // The file is written as `NAME.partial` (locked: one run at a
+        // time) and renamed to `NAME` by `finish`: a run that never gets
+        // there leaves the file it would replace as it was.
+        let staged = crate::output::Staged::claim(path, force).map_err(err)?;
+        let partial = staged.partial().to_path_buf();
+        let err = |m: String| RecordError::Create {
+            path: path.to_path_buf(),
+            message: m,
+        };
         // Metrics arrive a few dozen scalars a step: batched over a second
         // (rerun's default for files is 200 ms), a chunk holds many steps
         // instead of one, which keeps the per-chunk overhead (about a
@@ -573,7 +585,13 @@ impl Recorder {
         if deterministic {
             builder = builder.recording_id("mpmlab-test");
         }
-        let rec = builder.save(path).map_err(|e| err(e.to_string()))?;
+        let rec = match builder.save(&partial) {
+            Ok(rec) => rec,
+            Err(e) => {
+                staged.discard();
+                return Err(err(e.to_string()));
+            }
+        };
         if deterministic {
             rec.set_log_time_enabled(false);
             // A fixed recording id leaves out rerun's properties chunk, and
@@ -592,6 +610,7 @@ impl Recorder {
         let mut r = Recorder {
             rec,
             path: path.to_path_buf(),
+            staged: Some(staged),
             iteration: 0,
             field: colour,
             settings,
@@ -1098,18 +1117,41 @@ impl Recorder {
         self.check(logged)
     }
 
+    /// Close the recording and remove its temporary file: the run never
+    /// started, and the file at its path stays as it was.
+    pub fn discard(mut self) {
+        let staged = self.staged.take();
+        let _ = self.writer.join();
+        drop(self);
+        if let Some(s) = staged {
+            s.discard();
+        }
+    }
+
     /// Flush everything to disk and close the file; its size and what it
     /// holds.
+    /// When it cannot be, the file stays as `NAME.partial`, which the
+    /// error names with the command that repairs it.
     pub fn finish(mut self) -> Result<RecordingSize, RecordError> {
-        let joined = self.writer.join();
-        if let Some(e) = joined {
-            return Err(RecordError::Write {
-                path: self.path.clone(),
-                message: e,
-            });
+        let kept = |path: &Path, partial: Option<&Path>, e: String| RecordError::Write {
+            path: path.to_path_buf(),
+            message: match partial {
+                Some(p) => format!(
+                    "{e}; what was written is kept as {} (mpmlab repair {} {})",
+                    p.display(),
+                    p.display(),
+                    path.display()
+                ),
+                None => e,
+            },
+        };
+        let partial = self.staged.as_ref().map(|s| s.partial().to_path_buf());
+        if let Some(e) = self.writer.join() {
+            return Err(kept(&self.path, partial.as_deref(), e));
         }
-        let r = self.rec.flush_blocking();
-        self.check(r)?;
+        if let Err(e) = self.rec.flush_blocking() {
+            return Err(kept(&self.path, partial.as_deref(), e.to_string()));
+        }
         let size = RecordingSize {
             bytes: 0,
             steps: self.steps.len(),
@@ -1117,8 +1159,15 @@ impl Recorder {
             points: self.points,
         };
         let path = self.path.clone();
+        let staged = self.staged.take();
         // The file sink writes its footer when the last handle goes.
         drop(self);
+        if let Some(s) = staged {
+            s.commit().map_err(|message| RecordError::Write {
+                path: path.clone(),
+                message,
+            })?;
+        }
         let bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
         Ok(RecordingSize { bytes, ..size })
     }

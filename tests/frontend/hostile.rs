@@ -1713,17 +1713,148 @@ fn record_does_not_overwrite_what_is_not_a_recording() {
     let (code, _, err) = mpmlab(&["run", s, "--quiet", "--record", "/proc/version"]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("/proc/version"), "{err}");
-    // A full disk: the device is refused without --force; with it, the
-    // write fails with exit 3 naming the path and the cause.
-    let (code, _, err) = mpmlab(&["run", s, "--quiet", "--record", "/dev/full"]);
+    // A device is never replaced, --force or not (it used to be replaced
+    // by a regular file through the temporary file's rename).
+    for force in [false, true] {
+        let mut args = vec!["run", s, "--quiet", "--record", "/dev/full"];
+        if force {
+            args.push("--force");
+        }
+        let (code, _, err) = mpmlab(&args);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("/dev/full") && err.contains("a device"), "{err}");
+    }
+    assert!(!std::path::Path::new("/dev/full").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn outputs_never_replace_the_scene_and_clash_by_identity() {
+    let dir = temp_path("hostile-identity", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("s.toml");
+    let text = shipped("patch-compression");
+    std::fs::write(&scene, &text).unwrap();
+    std::os::unix::fs::symlink(&scene, dir.join("link.rrd")).unwrap();
+    std::fs::hard_link(&scene, dir.join("hard.csv")).unwrap();
+    let s = scene.to_str().unwrap();
+    // The scene, through its own name, a symlink and a hard link: refused
+    // with --force too, and untouched.
+    for (flag, target) in [("--record", "s.toml"), ("--record", "link.rrd"), ("--csv", "hard.csv")] {
+        let t = dir.join(target);
+        let (code, _, err) = mpmlab(&["run", s, "--quiet", "--force", flag, t.to_str().unwrap()]);
+        assert_eq!(code, 2, "{flag} {target}: {err}");
+        assert!(err.contains("is the scene file itself"), "{err}");
+        assert_eq!(std::fs::read_to_string(&scene).unwrap(), text);
+    }
+    // The recording and the table named one file by two spellings.
+    let rrd = dir.join("out.rrd");
+    let (code, _, err) = mpmlab(&[
+        "run",
+        s,
+        "--quiet",
+        "--record",
+        rrd.to_str().unwrap(),
+        "--csv",
+        &format!("{}/./out.rrd", dir.display()),
+    ]);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("/dev/full") && err.contains("not a regular file"), "{err}");
-    let (code, _, err) = mpmlab(&["run", s, "--quiet", "--force", "--record", "/dev/full"]);
+    assert!(err.contains("name the same file"), "{err}");
+    assert!(!rrd.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_run_that_cannot_start_leaves_the_old_outputs_as_they_were() {
+    let dir = temp_path("hostile-keep", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("s.toml");
+    std::fs::write(&scene, shipped("patch-compression")).unwrap();
+    let s = scene.to_str().unwrap();
+    let (rrd, csv) = (dir.join("run.rrd"), dir.join("run.csv"));
+    let (r, c) = (rrd.to_str().unwrap(), csv.to_str().unwrap());
+    let (code, _, err) = mpmlab(&["run", s, "--quiet", "--record", r, "--csv", c]);
+    assert_eq!(code, 0, "{err}");
+    let (old_rrd, old_csv) = (std::fs::read(&rrd).unwrap(), std::fs::read(&csv).unwrap());
+    // The ParaView series cannot be created: the run ends before its
+    // first step (it used to have truncated both files by then).
+    let (code, _, err) = mpmlab(&[
+        "run",
+        s,
+        "--quiet",
+        "--record",
+        r,
+        "--csv",
+        c,
+        "--vtk",
+        "/proc/mpmlab-no",
+    ]);
+    assert_eq!(code, 3, "{err}");
+    assert_eq!(std::fs::read(&rrd).unwrap(), old_rrd);
+    assert_eq!(std::fs::read(&csv).unwrap(), old_csv);
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".partial"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // A `.partial` left by a run that did not finish is kept unless
+    // --force: it may be the only copy of a long run's recording.
+    let partial = dir.join("run.rrd.partial");
+    std::fs::write(&partial, b"RRF2 cut short").unwrap();
+    let (code, _, err) = mpmlab(&["run", s, "--quiet", "--record", r]);
     assert_eq!(code, 3, "{err}");
     assert!(
-        err.contains("/dev/full") && err.contains("No space left on device"),
+        err.contains("left from a run") && err.contains("mpmlab repair"),
         "{err}"
     );
+    assert_eq!(std::fs::read(&partial).unwrap(), b"RRF2 cut short");
+    assert_eq!(std::fs::read(&rrd).unwrap(), old_rrd);
+    let (code, _, err) = mpmlab(&["run", s, "--quiet", "--record", r, "--force"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!partial.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_second_run_writing_the_same_recording_is_refused() {
+    let dir = temp_path("hostile-two-writers", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let rrd = dir.join("run.rrd");
+    let bin = env!("CARGO_BIN_EXE_mpmlab");
+    // The first run is long enough to be running when the second starts:
+    // it prints its first step once its recording is open and locked.
+    let mut first = std::process::Command::new(bin)
+        .args(["run", "scenarios/ghost-collision-plastic.toml", "--record"])
+        .arg(&rrd)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(first.stdout.take().unwrap()));
+    assert!(
+        lines.any(|l| l.unwrap().trim_start().starts_with('1')),
+        "the first run prints step 1"
+    );
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--quiet",
+        "--record",
+        rrd.to_str().unwrap(),
+    ]);
+    let _ = std::process::Command::new("kill")
+        .args(["-INT", &first.id().to_string()])
+        .status();
+    drop(lines);
+    let status = first.wait().unwrap();
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("another run is writing"), "{err}");
+    assert!(matches!(status.code(), Some(0 | 130)), "{status:?}");
+    // The first run's recording is whole: its own rows only.
+    let head = std::fs::read(&rrd).unwrap();
+    assert_eq!(&head[..3], b"RRF");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -1009,7 +1009,10 @@ fn a_killed_run_is_repaired_with_every_step_it_printed() {
     // Rows already in the pipe were printed before the kill too.
     let printed = rx.iter().fold(seen, i64::max);
     assert!((20..1000).contains(&printed), "{printed}");
-    let file = std::fs::File::open(&path).unwrap();
+    // The run never renamed its file into place: it is `NAME.partial`.
+    assert!(!path.exists(), "a killed run's file keeps its temporary name");
+    let partial = mpmlab::output::partial_of(&path);
+    let file = std::fs::File::open(&partial).unwrap();
     let mut it = rerun::external::re_log_encoding::DecoderApp::decode_eager(std::io::BufReader::new(file)).unwrap();
     it.by_ref().for_each(drop);
     assert!(
@@ -1017,7 +1020,7 @@ fn a_killed_run_is_repaired_with_every_step_it_printed() {
         "a killed run's file has no footer"
     );
 
-    let (code, out, err) = common::mpmlab(&["repair", path.to_str().unwrap(), fixed.to_str().unwrap()]);
+    let (code, out, err) = common::mpmlab(&["repair", partial.to_str().unwrap(), fixed.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("repaired"), "{out}");
     assert!(
@@ -1043,6 +1046,7 @@ fn a_killed_run_is_repaired_with_every_step_it_printed() {
     for p in [&path, &fixed, &again] {
         let _ = std::fs::remove_file(p);
     }
+    let _ = std::fs::remove_file(&partial);
 }
 
 #[test]
@@ -1101,15 +1105,23 @@ fn a_second_signal_ends_the_run_at_once_and_its_recording_can_be_repaired() {
     let status = child.wait().unwrap();
     assert_eq!(status.code(), Some(130));
     let printed = rx.iter().fold(seen, i64::max);
-    // The first signal may have closed the file before the second came;
-    // either way the repaired file holds every printed step.
-    let (code, out, err) = common::mpmlab(&["repair", path.to_str().unwrap(), fixed.to_str().unwrap()]);
+    // The first signal may have closed the file (renamed into place)
+    // before the second came, or not (left as `NAME.partial`); either way
+    // the repaired file holds every printed step.
+    let partial = mpmlab::output::partial_of(&path);
+    let written = if path.exists() {
+        path.to_path_buf()
+    } else {
+        partial.clone()
+    };
+    let (code, out, err) = common::mpmlab(&["repair", written.to_str().unwrap(), fixed.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("repaired"), "{out}");
     holds_steps_up_to(&verified_chunks(&fixed), printed);
     for p in [&path, &fixed] {
         let _ = std::fs::remove_file(p);
     }
+    let _ = std::fs::remove_file(&partial);
 }
 
 #[test]

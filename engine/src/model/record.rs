@@ -149,7 +149,7 @@ impl Plan {
             return true;
         }
         match (self.every, self.dt) {
-            (Some(n), _) => k % n == 0,
+            (Some(n), _) => k.is_multiple_of(n),
             (None, Some((s, t))) => {
                 // The first step at or past each multiple of t (a small
                 // tolerance so that t = n s lands on step n exactly).
