@@ -564,10 +564,6 @@ impl Recorder {
         // there leaves the file it would replace as it was.
         let staged = crate::output::Staged::claim(path, force).map_err(err)?;
         let partial = staged.partial().to_path_buf();
-        let err = |m: String| RecordError::Create {
-            path: path.to_path_buf(),
-            message: m,
-        };
         // Metrics arrive a few dozen scalars a step: batched over a second
         // (rerun's default for files is 200 ms), a chunk holds many steps
         // instead of one, which keeps the per-chunk overhead (about a

@@ -265,9 +265,13 @@ fn engine(
 pub fn run(sim: Simulation, scene_text: String, recorder: Option<Recorder>) -> std::io::Result<()> {
     let mut app = App::new(
         &sim,
-        recorder
-            .as_ref()
-            .map(|r| format!("{} (points {})", r.path().display(), r.points_cadence())),
+        recorder.as_ref().map(|r| {
+            format!(
+                "{} (written as .partial until the session ends; points {})",
+                r.path().display(),
+                r.points_cadence()
+            )
+        }),
     );
     let (cmd_tx, cmd_rx) = mpsc::channel();
     let cancel = Arc::new(AtomicBool::new(false));
