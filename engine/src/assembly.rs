@@ -510,6 +510,15 @@ impl Pattern {
         Ok(Pattern { n, symbolic, storage })
     }
 
+    /// Whether `other` stores the same entries (its matrices share this
+    /// one's symbolic factorisation).
+    pub fn same_structure(&self, other: &Pattern) -> bool {
+        self.n == other.n
+            && self.storage == other.storage
+            && self.symbolic.col_ptr() == other.symbolic.col_ptr()
+            && self.symbolic.row_idx() == other.symbolic.row_idx()
+    }
+
     /// Stored entries.
     pub fn nnz(&self) -> usize {
         self.symbolic.row_idx().len()
@@ -543,12 +552,21 @@ impl Pattern {
             let Dof::Free(col) = dofs.node_dof[nc][0] else { continue };
             let range = self.symbolic.col_range(col);
             let column = &ri[range.clone()];
+            // Rows come in ascending order when the nodes do (a stencil's
+            // do, and unknowns are numbered in node order): walk the
+            // column from the last row found, else search it.
+            let mut k = 0;
             for (r, &nr) in nodes.iter().enumerate() {
                 if let Dof::Free(row) = dofs.node_dof[nr][0] {
                     if self.storage == Storage::Full || row >= col {
-                        let k = column
-                            .binary_search(&(row as Ix))
-                            .expect("the pattern holds every block entry");
+                        let row = row as Ix;
+                        if column.get(k).is_none_or(|&x| x > row) {
+                            k = 0;
+                        }
+                        while column.get(k).is_some_and(|&x| x < row) {
+                            k += 1;
+                        }
+                        assert!(column.get(k) == Some(&row), "the pattern holds every block entry");
                         values[range.start + k] += kb[r * m + c];
                     }
                 }

@@ -46,6 +46,12 @@ pub struct Factor {
 }
 
 impl Factor {
+    /// The buffer of `L`'s values, for the next factor of the same size
+    /// ([`cholesky_reusing`]).
+    pub fn into_values(self) -> Vec<f64> {
+        self.values
+    }
+
     /// Overwrite `x` with `A^-1 x`.
     pub fn solve_in_place(&self, x: &mut Mat<f64>) {
         let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(x.ncols(), par()));
@@ -299,9 +305,29 @@ pub fn numeric_llt(
 /// when its estimate ([`cholesky_bytes`]) exceeds `budget`
 /// ([`check_memory`]); an allocation that fails is an error too.
 pub fn cholesky_with(symbolic: &CholeskySymbolic, a: SparseRef<'_>, budget: u64) -> Result<Factor, FactorError> {
+    cholesky_reusing(symbolic, a, budget, Vec::new())
+}
+
+/// [`cholesky_with`] writing the factor's values into `spare` (a buffer
+/// of an earlier factor, [`Factor::into_values`]) when it is large
+/// enough: a step that factorises a matrix of the same size every time
+/// reuses its memory instead of having fresh pages zeroed by the system.
+pub fn cholesky_reusing(
+    symbolic: &CholeskySymbolic,
+    a: SparseRef<'_>,
+    budget: u64,
+    mut spare: Vec<f64>,
+) -> Result<Factor, FactorError> {
     let s = symbolic;
     check_memory(|| factor_what("Cholesky", s), cholesky_bytes(s), budget)?;
-    let mut values = factor_values(s, || factor_what("Cholesky", s))?;
+    let mut values = if spare.capacity() >= s.len_val() {
+        spare.clear();
+        spare.resize(s.len_val(), 0.0);
+        spare
+    } else {
+        drop(spare);
+        factor_values(s, || factor_what("Cholesky", s))?
+    };
     numeric_llt(s, a, &mut values)?.map_err(|pivot| FactorError::NotPositiveDefinite { pivot })?;
     Ok(Factor {
         symbolic: s.clone(),

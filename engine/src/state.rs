@@ -542,7 +542,8 @@ pub(crate) fn check_points(
 }
 
 /// The mass pattern and symbolic Cholesky of the last step, reused while
-/// the assembly blocks (point groups and ghost faces) stay the same.
+/// the assembly blocks (point groups and ghost faces) stay the same, or,
+/// when they change, while the patterns they give do.
 #[derive(Default)]
 pub(crate) struct MassCache {
     pub(crate) key: Vec<Vec<usize>>,
@@ -552,4 +553,7 @@ pub(crate) struct MassCache {
     /// Per scalar part of the mass (one, or one per component), its
     /// pattern and symbolic Cholesky; empty before the first step.
     pub(crate) parts: Vec<(crate::assembly::Pattern, crate::linalg::CholeskySymbolic)>,
+    /// The last factors' value buffers, handed back for the next step's
+    /// factors of the same parts (implicit dynamics' projection).
+    pub(crate) spare: Vec<Vec<f64>>,
 }

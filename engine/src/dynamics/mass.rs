@@ -223,18 +223,24 @@ pub(super) fn consistent_mass(
     pattern.owned_matrix(values)
 }
 
-/// Pattern and symbolic Cholesky of each scalar part (values only give the
-/// structure here).
-fn analyse_parts(
-    parts: &[(DofMap, Vec<Vec<usize>>)],
-    blocks: &[&[usize]],
-    relaxed: bool,
-) -> Result<Vec<(Pattern, linalg::CholeskySymbolic)>, linalg::FactorError> {
+/// The pattern of each scalar part.
+fn part_patterns(parts: &[(DofMap, Vec<Vec<usize>>)], blocks: &[&[usize]]) -> Result<Vec<Pattern>, linalg::FactorError> {
     parts
         .iter()
-        .map(|(dofs, _)| {
+        .map(|(dofs, _)| Pattern::new(dofs, blocks, Storage::Lower))
+        .collect()
+}
+
+/// The symbolic Cholesky of each pattern (values only give the structure
+/// here).
+fn analyse_parts(
+    patterns: Vec<Pattern>,
+    relaxed: bool,
+) -> Result<Vec<(Pattern, linalg::CholeskySymbolic)>, linalg::FactorError> {
+    patterns
+        .into_iter()
+        .map(|pattern| {
             // The symbolic factorisation reads the structure alone.
-            let pattern = Pattern::new(dofs, blocks, Storage::Lower)?;
             let zeros = crate::assembly::try_filled(pattern.nnz(), 0.0, "the values of the mass matrix")?;
             let symbolic = linalg::cholesky_symbolic_relaxed(pattern.matrix(&zeros), relaxed)?;
             Ok((pattern, symbolic))
@@ -430,15 +436,17 @@ impl GridMass {
         let faces = if kind == MassKind::Stabilised { faces } else { &[] };
         let blocks = blocks_of(map, faces);
         let parts = scalar_parts(&map.dofs);
-        let (cache, _) = analysed(sim, &parts, &blocks, true)?;
+        let (mut cache, _) = analysed(sim, &parts, &blocks, true, true)?;
         let values = scalar_mass_values(map, &parts, &cache.parts, faces, &sim.state.points.mass, gamma_m)?;
+        let mut spare = std::mem::take(&mut cache.spare);
         let parts = parts
             .into_iter()
             .zip(&cache.parts)
             .zip(values)
             .map(|(((_, components), (pattern, symbolic)), values)| {
                 let matrix = pattern.owned_matrix(values)?;
-                let factor = linalg::cholesky_with(symbolic, matrix.as_ref(), budget)?;
+                let buffer = spare.pop().unwrap_or_default();
+                let factor = linalg::cholesky_reusing(symbolic, matrix.as_ref(), budget, buffer)?;
                 Ok(ScalarMass {
                     factor,
                     matrix,
@@ -447,6 +455,15 @@ impl GridMass {
             })
             .collect::<Result<Vec<_>, linalg::FactorError>>()?;
         Ok(GridMass(MassSolver::Consistent(parts)))
+    }
+
+    /// Hand the factors' buffers to the simulation's mass cache for the
+    /// next step's factors.
+    pub(crate) fn recycle(self, sim: &Simulation) {
+        if let MassSolver::Consistent(parts) = self.0 {
+            let mut cache = sim.mass_cache.lock().unwrap_or_else(|e| e.into_inner());
+            cache.spare = parts.into_iter().rev().map(|p| p.factor.into_values()).collect();
+        }
     }
 
     /// `M x = sum_p m_p S_p^T f_p` for the point field `field` (per
@@ -471,31 +488,47 @@ impl GridMass {
 
 /// The mass pattern and symbolic Cholesky of each scalar part for these
 /// blocks: the last step's, kept in the simulation, while its blocks
-/// (point groups and ghost faces) are the same, else analysed anew and
+/// (point groups and ghost faces) are the same or, with `by_structure`,
+/// give the same patterns (points that moved within their cells change
+/// the groups, seldom the node pairs they couple), else analysed anew and
 /// kept. Returns the cache, held, and whether it was hit.
+///
+/// Explicit dynamics keys on the blocks alone (its reports say whether
+/// the step mapped the same cells); the implicit dynamic step's
+/// projection keys on the structure too.
 fn analysed<'s>(
     sim: &'s Simulation,
     parts: &[(DofMap, Vec<Vec<usize>>)],
     blocks: &[&[usize]],
     relaxed: bool,
+    by_structure: bool,
 ) -> Result<(std::sync::MutexGuard<'s, MassCache>, bool), linalg::FactorError> {
     // A panic while the cache was held left it whole or stale, never
     // half-written: it is reset below when its key does not match.
     let mut cache = sim.mass_cache.lock().unwrap_or_else(|e| e.into_inner());
-    let reused = cache.parts.len() == parts.len()
-        && cache.relaxed == relaxed
+    let comparable = cache.parts.len() == parts.len() && cache.relaxed == relaxed;
+    if comparable
         && cache.key.len() == blocks.len()
-        && cache.key.iter().zip(blocks).all(|(k, b)| k.as_slice() == *b);
-    if !reused {
-        *cache = MassCache::default();
-        let parts = analyse_parts(parts, blocks, relaxed)?;
-        *cache = MassCache {
-            key: blocks.iter().map(|b| b.to_vec()).collect(),
-            relaxed,
-            parts,
-        };
+        && cache.key.iter().zip(blocks).all(|(k, b)| k.as_slice() == *b)
+    {
+        return Ok((cache, true));
     }
-    Ok((cache, reused))
+    let patterns = part_patterns(parts, blocks)?;
+    let key = blocks.iter().map(|b| b.to_vec()).collect();
+    if by_structure && comparable && cache.parts.iter().zip(&patterns).all(|((p, _), q)| p.same_structure(q)) {
+        cache.key = key;
+        return Ok((cache, true));
+    }
+    let spare = std::mem::take(&mut cache.spare);
+    *cache = MassCache::default();
+    let parts = analyse_parts(patterns, relaxed)?;
+    *cache = MassCache {
+        key,
+        relaxed,
+        parts,
+        spare,
+    };
+    Ok((cache, false))
 }
 
 /// Factorise the consistent or stabilised mass of this step (reusing the
@@ -511,7 +544,7 @@ pub(super) fn factorise_mass(
 ) -> Result<(MassSolver, bool), StepFailure> {
     let blocks = blocks_of(map, faces);
     let parts = scalar_parts(&map.dofs);
-    let (cache, reused) = analysed(sim, &parts, &blocks, false).map_err(|e| match e {
+    let (cache, reused) = analysed(sim, &parts, &blocks, false, false).map_err(|e| match e {
         e @ linalg::FactorError::Memory { .. } => e.at_step(step),
         e => StepFailure::Singular {
             step,
@@ -574,7 +607,9 @@ pub(crate) fn grid_velocities(sim: &Simulation, kind: MassKind) -> Result<Vec<(u
         let blocks = blocks_of(&map, &faces);
         let parts = scalar_parts(&map.dofs);
         let points = PointsOnGrid::of(sim);
-        let analyses = analyse_parts(&parts, &blocks, false).map_err(|e| e.to_string())?;
+        let analyses = part_patterns(&parts, &blocks)
+            .and_then(|p| analyse_parts(p, false))
+            .map_err(|e| e.to_string())?;
         let gamma = sim.params.gamma_m;
         MassSolver::Consistent(
             factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX)
@@ -647,7 +682,7 @@ mass = "stabilised"
             let gamma = sim.params.gamma_m;
             let parts = scalar_parts(&map.dofs);
             assert_eq!(parts.len(), if roller { 2 } else { 1 });
-            let analyses = analyse_parts(&parts, &blocks, false).unwrap();
+            let analyses = analyse_parts(part_patterns(&parts, &blocks).unwrap(), false).unwrap();
             let solver = MassSolver::Consistent(
                 factorise_parts(&map, parts, &analyses, &blocks, &faces, &points, gamma, u64::MAX).unwrap(),
             );
@@ -677,5 +712,48 @@ mass = "stabilised"
                 "roller {roller}: energy {e} vs {e_ref}"
             );
         }
+    }
+
+    /// The analysis is kept while the blocks are the same list, and while
+    /// other blocks give the same patterns (here the same blocks in the
+    /// reverse order), and made anew when a block couples new nodes. A
+    /// projection whose factors reuse the last one's buffers
+    /// ([`GridMass::recycle`]) gives the same grid fields to the bit.
+    #[test]
+    fn the_mass_analysis_is_kept_while_the_patterns_are() {
+        let sim = block(true);
+        let model = &sim.model;
+        let map = Mapping::build(&model.grid, &sim.state.points, &model.bodies, &model.dirichlet, 0.0).unwrap();
+        let faces = ghost::faces_of(&model.grid, &map, model.analysis.ghost_cells);
+        let blocks = blocks_of(&map, &faces);
+        let parts = scalar_parts(&map.dofs);
+        let hit = |blocks: &[&[usize]]| analysed(&sim, &parts, blocks, true, true).unwrap().1;
+        assert!(!hit(&blocks), "the first analysis");
+        assert!(hit(&blocks), "the same blocks");
+        let reversed: Vec<&[usize]> = blocks.iter().rev().copied().collect();
+        assert!(hit(&reversed), "other blocks, the same pattern");
+        let active: Vec<usize> = (0..map.dofs.node_dof.len())
+            .filter(|&n| map.dofs.node_dof[n][0] != Dof::Inactive)
+            .collect();
+        let far = [active[0], active[active.len() - 1]];
+        let mut wider = blocks.clone();
+        wider.push(&far);
+        assert!(!hit(&wider), "a block that couples two far nodes");
+        assert!(!hit(&blocks), "back to the first pattern");
+        let by_blocks = |blocks: &[&[usize]]| analysed(&sim, &parts, blocks, true, false).unwrap().1;
+        assert!(!by_blocks(&reversed), "keyed on the blocks alone");
+
+        let pts = &sim.state.points;
+        let b: Vec<f64> = (0..map.dofs.n_free).map(|i| (i as f64 * 0.37).sin()).collect();
+        let project = || {
+            let mass = GridMass::new(&sim, &map, &faces, MassKind::Stabilised, sim.params.gamma_m, u64::MAX).unwrap();
+            let out = mass.map_points_and_solve(&map, &pts.mass, &pts.v, &b);
+            mass.recycle(&sim);
+            out
+        };
+        let first = project();
+        let spare = sim.mass_cache.lock().unwrap().spare.len();
+        assert_eq!(spare, parts.len(), "one buffer per part kept");
+        assert_eq!(project(), first, "reused buffers, the same fields");
     }
 }

@@ -179,6 +179,7 @@ impl Inertia {
             }
         })?;
         let (v0, mut a0) = grid_mass.map_points_and_solve(map, &pts.mass, &pts.v, r);
+        grid_mass.recycle(sim);
         if !previous.is_empty() && scheme.alpha != 0.0 {
             let alpha = scheme.alpha;
             for (a, p) in a0.iter_mut().zip(previous) {
@@ -387,9 +388,17 @@ impl Contribution for std::rc::Rc<Inertia> {
         let n = g.nodes.len();
         let m2 = 2 * n;
         // The scalar block `sum_p m_p c0 S_a S_b` (the lumped mass: its
-        // diagonal), then `(x) I_2`.
-        let mut scalar = vec![0.0; n * n];
-        let mut w = Vec::with_capacity(n);
+        // diagonal), then `(x) I_2`; it and a point's weights on the
+        // stack for stencils of up to 4 x 4 nodes (GIMP's).
+        const SMALL: usize = 16;
+        let (mut small, mut large) = ([0.0; SMALL * SMALL + SMALL], Vec::new());
+        let buffer: &mut [f64] = if n <= SMALL {
+            &mut small[..n * n + n]
+        } else {
+            large.resize(n * n + n, 0.0);
+            &mut large
+        };
+        let (scalar, w) = buffer.split_at_mut(n * n);
         for &p in &g.points {
             let m = pts.mass[p] * c0;
             if m == 0.0 {
@@ -397,14 +406,15 @@ impl Contribution for std::rc::Rc<Inertia> {
             }
             let st = map.stencils.get(p);
             debug_assert_eq!(st.len(), n);
-            w.clear();
-            w.extend((0..n).map(|a| st.w(a)));
+            for (b, w) in w.iter_mut().enumerate() {
+                *w = st.w(b);
+            }
             for a in 0..n {
                 let wa = m * w[a];
                 match self.mass.kind {
                     MassKind::Lumped => scalar[a * n + a] += wa,
                     _ => {
-                        for (s, wb) in scalar[a * n..(a + 1) * n].iter_mut().zip(&w) {
+                        for (s, wb) in scalar[a * n..(a + 1) * n].iter_mut().zip(&*w) {
                             *s += wa * wb;
                         }
                     }
