@@ -117,7 +117,8 @@ pub struct RunArgs {
     /// Write checkpoints (the complete state, to resume from) into this
     /// folder: `step-NNNNNN.ckpt` every --checkpoint-every steps, after
     /// the last step, and of the last good state when a step fails or the
-    /// run is interrupted.
+    /// run is interrupted. A folder holding other files is refused (or
+    /// with --force written beside them); one run at a time writes it.
     #[arg(long, value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
     /// Steps between checkpoints (default: only the last).
@@ -128,7 +129,10 @@ pub struct RunArgs {
     /// uninterrupted run ends.
     #[arg(long, value_name = "FILE")]
     pub resume: Option<PathBuf>,
-    /// Replace an existing --record or --csv file whatever it holds.
+    /// Replace an existing --record or --csv regular file whatever it
+    /// holds, a stale NAME.partial, and write checkpoints into a folder
+    /// holding other files (never the scene, a folder, a device, FIFO or
+    /// socket).
     #[arg(long)]
     pub force: bool,
     #[command(flatten)]

@@ -28,8 +28,8 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
 /// before the scene is loaded (exit 2).
 fn check_args(args: &RunArgs) -> Result<(), ExitCode> {
     let (path, record, force) = (args.scene.as_path(), args.record.as_deref(), args.force);
-    if force && record.is_none() && args.csv.is_none() {
-        return Err(fail(2, "--force needs --record FILE or --csv FILE"));
+    if force && record.is_none() && args.csv.is_none() && args.checkpoint.is_none() {
+        return Err(fail(2, "--force needs --record FILE, --csv FILE or --checkpoint DIR"));
     }
     if record.is_none() && args.cadence.given() {
         return Err(fail(
@@ -102,14 +102,14 @@ impl Outputs {
     /// Every output created (exit 3 when one cannot be; exit 2 for
     /// recording settings the scene does not allow).
     fn open(args: &RunArgs, sim: &Simulation, text: &str) -> Result<Outputs, ExitCode> {
+        let settings = args.cadence.settings(sim).map_err(|e| fail(2, e))?;
         let checkpoints = match &args.checkpoint {
             Some(dir) => {
                 let every = args.checkpoint_every.map_or(usize::MAX, |n| n as usize);
-                Some(Checkpointer::create(dir, every, text).map_err(|e| fail(3, e))?)
+                Some(Checkpointer::create(dir, every, text, args.force).map_err(|e| fail(3, e))?)
             }
             None => None,
         };
-        let settings = args.cadence.settings(sim).map_err(|e| fail(2, e))?;
         let recorder = match &args.record {
             Some(p) => {
                 let r = args

@@ -1859,6 +1859,31 @@ fn a_second_run_writing_the_same_recording_is_refused() {
 }
 
 #[test]
+fn a_checkpoint_folder_with_other_files_is_refused_unless_forced() {
+    let dir = temp_path("hostile-ckpt-folder", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("notes.txt"), b"mine").unwrap();
+    let ck = dir.to_str().unwrap();
+    let (code, _, err) = mpmlab(&["run", "scenarios/patch-compression.toml", "--quiet", "--checkpoint", ck]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("notes.txt") && err.contains("--force"), "{err}");
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--quiet",
+        "--checkpoint",
+        ck,
+        "--force",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(dir.join("notes.txt")).unwrap(), b"mine");
+    assert!(std::fs::read_dir(&dir)
+        .unwrap()
+        .any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".ckpt")));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn sweeps_reject_bad_settings_before_running() {
     let dir = temp_path("hostile-sweep", "d");
     let out = dir.to_str().unwrap();
