@@ -224,7 +224,10 @@ pub(super) fn consistent_mass(
 }
 
 /// The pattern of each scalar part.
-fn part_patterns(parts: &[(DofMap, Vec<Vec<usize>>)], blocks: &[&[usize]]) -> Result<Vec<Pattern>, linalg::FactorError> {
+fn part_patterns(
+    parts: &[(DofMap, Vec<Vec<usize>>)],
+    blocks: &[&[usize]],
+) -> Result<Vec<Pattern>, linalg::FactorError> {
     parts
         .iter()
         .map(|(dofs, _)| Pattern::new(dofs, blocks, Storage::Lower))
@@ -507,10 +510,7 @@ fn analysed<'s>(
     // half-written: it is reset below when its key does not match.
     let mut cache = sim.mass_cache.lock().unwrap_or_else(|e| e.into_inner());
     let comparable = cache.parts.len() == parts.len() && cache.relaxed == relaxed;
-    if comparable
-        && cache.key.len() == blocks.len()
-        && cache.key.iter().zip(blocks).all(|(k, b)| k.as_slice() == *b)
-    {
+    if comparable && cache.key.len() == blocks.len() && cache.key.iter().zip(blocks).all(|(k, b)| k.as_slice() == *b) {
         return Ok((cache, true));
     }
     let patterns = part_patterns(parts, blocks)?;
