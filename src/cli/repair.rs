@@ -28,7 +28,7 @@ pub fn repair(input: &Path, output: &Path, force: bool) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(2);
     }
-    match mpmlab::record::repair::repair(input, output) {
+    match mpmlab::record::repair::repair(input, output, force) {
         Ok(r) => {
             out!("repaired {} into {}: {r}", input.display(), output.display());
             ExitCode::SUCCESS

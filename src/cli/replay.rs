@@ -9,7 +9,17 @@ use std::process::ExitCode;
 pub fn replay(file: &Path) -> Result<ExitCode> {
     use mpmlab::record::RERUN_VERSION;
     if !file.is_file() {
-        anyhow::bail!("{}: no such recording", file.display());
+        anyhow::bail!("{}: no such recording (a regular file)", file.display());
+    }
+    let mut magic = [0u8; 4];
+    let n = std::fs::File::open(file)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut magic))
+        .with_context(|| format!("cannot read {}", file.display()))?;
+    if !super::files::is_rrd(&magic[..n]) {
+        anyhow::bail!(
+            "{} is not a rerun recording (it does not start with RRF)",
+            file.display()
+        );
     }
     let viewer = std::env::var_os("PATH").and_then(|paths| {
         std::env::split_paths(&paths)

@@ -84,6 +84,8 @@ struct Frames {
     options: EncodingOptions,
     /// Bytes from the start to the end of the last complete message.
     end: u64,
+    /// Where each complete message starts and ends (bytes), in order.
+    spans: Vec<(u64, u64)>,
     complete: bool,
 }
 
@@ -96,12 +98,20 @@ fn scan(path: &Path) -> Result<Frames, RepairError> {
         path: path.to_path_buf(),
         message: m,
     };
-    let file = std::fs::File::open(path).map_err(read_err)?;
-    let meta = file.metadata().map_err(read_err)?;
+    // Checked before opening: opening a FIFO blocks until a writer comes.
+    let meta = std::fs::metadata(path).map_err(read_err)?;
     if !meta.is_file() {
-        return Err(not_rrd("not a regular file".into()));
+        return Err(not_rrd(format!(
+            "not a regular file ({})",
+            if meta.is_dir() {
+                "a folder"
+            } else {
+                "a device, FIFO or socket"
+            }
+        )));
     }
-    let size = meta.len();
+    let file = std::fs::File::open(path).map_err(read_err)?;
+    let size = file.metadata().map_err(read_err)?.len();
     let mut r = BufReader::new(file);
     let mut head = [0u8; StreamHeader::ENCODED_SIZE_BYTES];
     r.read_exact(&mut head)
@@ -111,6 +121,7 @@ fn scan(path: &Path) -> Result<Frames, RepairError> {
         .map_err(|e| not_rrd(e.to_string()))?;
     let mut end = head.len() as u64;
     let mut complete = false;
+    let mut spans = Vec::new();
     let mut mh = [0u8; MessageHeader::ENCODED_SIZE_BYTES];
     while end + mh.len() as u64 <= size {
         r.read_exact(&mut mh).map_err(read_err)?;
@@ -124,6 +135,7 @@ fn scan(path: &Path) -> Result<Frames, RepairError> {
                     complete = true;
                     break;
                 }
+                spans.push((end, e));
                 end = e;
                 r.seek(SeekFrom::Start(end)).map_err(read_err)?;
             }
@@ -134,13 +146,34 @@ fn scan(path: &Path) -> Result<Frames, RepairError> {
         version,
         options,
         end,
+        spans,
         complete,
     })
 }
 
-/// Repair `input` into `output` (written whole to a temporary file next
-/// to it, then renamed over it). `output` must not be `input`.
-pub fn repair(input: &Path, output: &Path) -> Result<Repaired, RepairError> {
+/// `f()`, or the panic's message when the decoder panics: rerun's arrow
+/// decoder panics on some damaged payloads instead of returning an
+/// error. The default hook's report is held back meanwhile (a repair
+/// reports the damage itself).
+fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    std::panic::set_hook(hook);
+    r.map_err(|p| {
+        p.downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "the decoder failed".into())
+    })
+}
+
+/// Repair `input` into `output`, written whole to `output`'s
+/// `.partial` (locked: a second writer of `output` is refused; a stale
+/// one is replaced only when `force`) and renamed into place. `output`
+/// must not be `input`. A damaged message ends the repair there (its
+/// byte range reported), whatever the decoder does with it.
+pub fn repair(input: &Path, output: &Path, force: bool) -> Result<Repaired, RepairError> {
     let frames = scan(input)?;
     let read_err = |e: String| RepairError::Read {
         path: input.to_path_buf(),
@@ -150,41 +183,65 @@ pub fn repair(input: &Path, output: &Path) -> Result<Repaired, RepairError> {
     let size = file.metadata().map_or(frames.end, |m| m.len());
     // The decoder sees the complete frames only: a cut message at the end
     // is not an error, it is what a repair drops.
-    let decoder = DecoderApp::decode_lazy(BufReader::new(file.take(frames.end)));
+    let mut decoder = DecoderApp::decode_lazy(BufReader::new(file.take(frames.end)));
 
     let write_err = |e: String| RepairError::Write {
         path: output.to_path_buf(),
         message: e,
     };
-    let mut tmp_name = output.as_os_str().to_owned();
-    tmp_name.push(".repairing");
-    let tmp = PathBuf::from(tmp_name);
-    let out = std::fs::File::create(&tmp).map_err(|e| write_err(e.to_string()))?;
-    let written = (|| {
+    let staged = crate::output::Staged::claim(output, force).map_err(write_err)?;
+    let out = std::fs::OpenOptions::new()
+        .write(true)
+        .truncate(true)
+        .open(staged.partial())
+        .map_err(|e| write_err(e.to_string()));
+    let written = out.and_then(|out| {
         let mut enc = Encoder::new_eager(frames.version, frames.options, BufWriter::new(out))
             .map_err(|e| write_err(e.to_string()))?;
         let step: rerun::TimelineName = "step".into();
         let (mut messages, mut last_step, mut stopped) = (0usize, None::<i64>, None);
-        for msg in decoder {
-            let msg = match msg {
-                Ok(m) => m,
-                Err(e) => {
-                    stopped = Some(format!("a message does not decode: {e}"));
+        loop {
+            let damaged = |why: String| match frames.spans.get(messages) {
+                Some((a, b)) => format!("message {} (bytes {a}..{b}) does not decode: {why}", messages + 1),
+                None => format!("message {} does not decode: {why}", messages + 1),
+            };
+            let msg = match guarded(|| decoder.next()) {
+                Ok(None) => break,
+                Ok(Some(Ok(m))) => m,
+                Ok(Some(Err(e))) => {
+                    stopped = Some(damaged(e.to_string()));
+                    break;
+                }
+                Err(panic) => {
+                    stopped = Some(damaged(panic));
                     break;
                 }
             };
             if let LogMsg::ArrowMsg(store, arrow) = &msg {
                 if store.is_recording() {
-                    if let Ok(chunk) = Chunk::from_arrow_msg(arrow) {
-                        let top = chunk
-                            .timelines()
-                            .get(&step)
-                            .and_then(|t| t.times_raw().iter().max().copied());
-                        last_step = last_step.max(top);
+                    match guarded(|| {
+                        Chunk::from_arrow_msg(arrow).map(|c| {
+                            c.timelines()
+                                .get(&step)
+                                .and_then(|t| t.times_raw().iter().max().copied())
+                        })
+                    }) {
+                        Ok(Ok(top)) => last_step = last_step.max(top),
+                        Ok(Err(_)) => {}
+                        Err(panic) => {
+                            stopped = Some(damaged(panic));
+                            break;
+                        }
                     }
                 }
             }
-            enc.append(&msg).map_err(|e| write_err(e.to_string()))?;
+            match guarded(|| enc.append(&msg)) {
+                Ok(r) => r.map_err(|e| write_err(e.to_string()))?,
+                Err(panic) => {
+                    stopped = Some(damaged(panic));
+                    break;
+                }
+            };
             messages += 1;
         }
         if messages == 0 {
@@ -197,22 +254,28 @@ pub fn repair(input: &Path, output: &Path) -> Result<Repaired, RepairError> {
         let f = w.into_inner().map_err(|e| write_err(e.error().to_string()))?;
         f.sync_all().map_err(|e| write_err(e.to_string()))?;
         Ok((messages, last_step, stopped))
-    })();
+    });
     let (messages, last_step, stopped) = match written {
         Ok(w) => w,
         Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
+            staged.discard();
             return Err(e);
         }
     };
-    std::fs::rename(&tmp, output).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        write_err(e.to_string())
-    })?;
+    staged.commit().map_err(write_err)?;
+    // Stopped at a damaged message: kept up to the last that decoded.
+    let kept = match (&stopped, messages.checked_sub(1).and_then(|m| frames.spans.get(m))) {
+        (Some(_), Some(&(_, end))) => end,
+        _ => frames.end,
+    };
     Ok(Repaired {
         messages,
-        kept_bytes: frames.end,
-        dropped_bytes: if frames.complete { 0 } else { size - frames.end },
+        kept_bytes: kept,
+        dropped_bytes: if frames.complete && stopped.is_none() {
+            0
+        } else {
+            size - kept
+        },
         complete: frames.complete,
         last_step,
         stopped,
