@@ -452,6 +452,12 @@ impl Simulation {
         Ok(reports)
     }
 
+    /// The names of the errors a step reports against the scene's exact
+    /// solution (none without one).
+    pub fn error_names(&self) -> Vec<String> {
+        self.exact_errors(0.0).iter().map(|e| e.name.to_string()).collect()
+    }
+
     /// Errors against the scene's exact solution at `load_factor` (none
     /// without one).
     pub(crate) fn exact_errors(&self, load_factor: f64) -> Vec<crate::exact::ErrorNorm> {

@@ -108,6 +108,29 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
                 }
             }
         }
+        // The search sets h and points per cell itself; a setting given
+        // twice would label runs with a value they did not use.
+        let own = [
+            Vary::parse("h=1").map_err(anyhow::Error::msg)?,
+            Vary::parse("ppc=1").map_err(anyhow::Error::msg)?,
+        ];
+        for t in &tries {
+            if own
+                .iter()
+                .any(|o| mpmlab::sweep::overlapping(&[o.clone(), t.clone()]).is_some())
+            {
+                eprintln!(
+                    "error: --try {}: the target search refines h and points per cell itself; \
+                     --try sets the other settings it compares (basis, placement, steps, delta, gamma_k)",
+                    t.key
+                );
+                return Ok(ExitCode::from(2));
+            }
+        }
+        if let Some(e) = mpmlab::sweep::overlapping(&tries) {
+            eprintln!("error: {}", e.replace("--vary", "--try"));
+            return Ok(ExitCode::from(2));
+        }
         return target_search(&name, &path, a.out.clone(), t, a.budget, tries);
     }
     for v in &a.vary {
@@ -176,6 +199,28 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
         out!("{line}")
     });
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
+    if a.estimate {
+        // The estimate needs three completed cell sizes; failed runs can
+        // leave fewer, which is said, not passed over.
+        let done = folder.collect();
+        let mut sizes: Vec<&str> = runs
+            .iter()
+            .filter(|r| done.get(&r.id).is_some_and(|d| d.completed))
+            .filter_map(|r| r.settings.iter().find(|(k, _)| k == "h" || k == "grid.h"))
+            .map(|(_, v)| v.as_str())
+            .collect();
+        sizes.sort_unstable();
+        sizes.dedup();
+        if sizes.len() < 3 {
+            eprintln!(
+                "error: --estimate: runs at only {} cell size{} completed ({}); an estimate needs three (the failed runs are in the table)",
+                sizes.len(),
+                if sizes.len() == 1 { "" } else { "s" },
+                if sizes.is_empty() { "none".to_string() } else { format!("h = {}", sizes.join(", ")) }
+            );
+            return Ok(ExitCode::from(1));
+        }
+    }
     Ok(ExitCode::SUCCESS)
 }
 

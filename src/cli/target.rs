@@ -45,9 +45,15 @@ pub fn target_search(
             return Ok(ExitCode::from(2));
         }
     };
-    if let Err(code) = load(path, &Limits::default()) {
-        return Ok(code);
+    let sim = match load(path, &Limits::default()) {
+        Ok((sim, _)) => sim,
+        Err(code) => return Ok(code),
+    };
+    if let Err(e) = t.check_against(&sim) {
+        eprintln!("error: --target {e}");
+        return Ok(ExitCode::from(2));
     }
+    drop(sim);
     if !tries.is_empty() {
         if let Err(e) = validate_runs(&base, &[], &mpmlab::sweep::expand(&tries)) {
             eprintln!("error: --try: {e}");

@@ -40,6 +40,9 @@ impl Target {
     /// Parse `error:<name>=TOL`, `probe:<name>:<key>=TOL` or
     /// `energy:<name>=TOL`.
     pub fn parse(s: &str) -> Result<Target, String> {
+        if s.matches('=').count() > 1 {
+            return Err(format!("`{s}`: expected one QUANTITY=TOL, e.g. error:stress_l2=1e-2"));
+        }
         let (q, t) = s
             .rsplit_once('=')
             .ok_or_else(|| format!("`{s}`: expected QUANTITY=TOL, e.g. error:stress_l2=1e-2 or probe:tip:uy=1e-3"))?;
@@ -63,6 +66,52 @@ impl Target {
             quantity: q.to_string(),
             tol,
         })
+    }
+
+    /// Whether the scene `sim` reports the quantity: an error of its exact
+    /// solution, a probe's column or an energy of the run's rows; the
+    /// refusal lists what it does report.
+    pub fn check_against(&self, sim: &crate::Simulation) -> Result<(), String> {
+        let q = &self.quantity;
+        let (kind, known): (&str, Vec<String>) = if q.starts_with("error:") {
+            let names = sim.error_names();
+            if names.is_empty() {
+                return Err(format!(
+                    "`{q}`: the scene has no exact solution to measure an error against; \
+                     target a probe (probe:<name>:<key>) or an energy (energy:strain), which are estimated"
+                ));
+            }
+            ("errors", names.into_iter().map(|n| format!("error:{n}")).collect())
+        } else if q.starts_with("probe:") {
+            let columns: Vec<String> = sim
+                .probe_values(None)
+                .iter()
+                .flat_map(|p| {
+                    p.columns()
+                        .into_iter()
+                        .map(move |(k, _, _)| format!("probe:{}:{k}", p.name))
+                })
+                .collect();
+            if columns.is_empty() {
+                return Err(format!("`{q}`: the scene has no probes ([[probe]] in the scene)"));
+            }
+            ("probe columns", columns)
+        } else {
+            (
+                "energies",
+                ["strain", "external_work"]
+                    .iter()
+                    .map(|n| format!("energy:{n}"))
+                    .collect(),
+            )
+        };
+        if known.iter().any(|k| k == q) {
+            return Ok(());
+        }
+        Err(format!(
+            "`{q}` is not reported by this scene; its {kind}: {}",
+            known.join(", ")
+        ))
     }
 
     /// Measured against the exact solution (else estimated).

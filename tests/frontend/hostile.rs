@@ -1920,12 +1920,66 @@ fn sweeps_reject_bad_settings_before_running() {
             "both set `body.0.points_per_cell`",
         ),
         (&["--vary", "h=0.5", "--try", "h=0.25"][..], "--try needs --target"),
+        // Target quantities the scene does not report (they ran to the
+        // budget and exited 1), and --try of what the search sets itself.
+        (&["--target", "error:nope=1e-2"][..], "its errors: error:stress_l2"),
+        (&["--target", "probe:nope:uy=1e-3"][..], "the scene has no probes"),
+        (&["--target", "energy:nope=1e-2"][..], "its energies: energy:strain"),
+        (&["--target", "error:stress_l2=1e-2=3"][..], "expected one QUANTITY=TOL"),
+        (
+            &["--target", "energy:strain=1e-2", "--try", "h=0.1"][..],
+            "refines h and points per cell itself",
+        ),
+        (
+            &["--target", "energy:strain=1e-2", "--try", "ppc=3"][..],
+            "refines h and points per cell itself",
+        ),
+        (
+            &[
+                "--target",
+                "energy:strain=1e-2",
+                "--try",
+                "body.0.basis=gimp",
+                "--try",
+                "body.0.basis=standard",
+            ][..],
+            "both set `body.0.basis`",
+        ),
     ] {
         let (code, o, err) = sweep(args);
         assert_eq!(code, 2, "{args:?}: {o}{err}");
         assert!(err.contains(fragment), "{args:?}: {err}");
         assert!(!dir.exists(), "{args:?}: the sweep folder was written");
     }
+
+    // An error target on a scene without an exact solution.
+    let (code, _, err) = mpmlab(&[
+        "sweep",
+        "scenarios/collapse-von-mises.toml",
+        "--out",
+        out,
+        "--target",
+        "error:stress_l2=1e-2",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no exact solution"), "{err}");
+    assert!(!dir.exists());
+    // --estimate when fewer than three sizes complete (every run fails: one
+    // Newton iteration, no cutbacks): said, exit 1 (it exited 0 silently).
+    let (code, o, err) = sweep(&[
+        "--vary",
+        "h=0.5,0.25,0.125",
+        "--vary",
+        "analysis.kind=quasi-static-finite",
+        "--vary",
+        "analysis.max_iterations=1",
+        "--vary",
+        "analysis.max_cutbacks=0",
+        "--estimate",
+    ]);
+    assert_eq!(code, 1, "{o}{err}");
+    assert!(err.contains("only 0 cell sizes completed"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
 
     // Emitted jobs carry absolute paths; collecting with none run fails
     // loudly; with one run, the missing one is named.
