@@ -47,6 +47,33 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     Identity::of(a) == Identity::of(b)
 }
 
+/// A file-name stem made from a scene's name for default output names:
+/// letters, digits, `-`, `_` and `.` kept (ASCII), anything else one `_`,
+/// at most 48 bytes (a file system's names end at 255: a scene named with
+/// a hundred emoji made `tui` fail), `scene` when nothing is left.
+pub fn safe_stem(name: &str) -> String {
+    let mut out = String::new();
+    for c in name.chars() {
+        let c = if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+            c
+        } else {
+            '_'
+        };
+        if !(c == '_' && out.ends_with('_')) {
+            out.push(c);
+        }
+        if out.len() >= 48 {
+            break;
+        }
+    }
+    let out = out.trim_matches(|c| c == '_' || c == '.').to_string();
+    if out.is_empty() {
+        "scene".into()
+    } else {
+        out
+    }
+}
+
 /// `NAME.partial` of `path`.
 pub fn partial_of(path: &Path) -> PathBuf {
     let mut s = path.as_os_str().to_owned();
@@ -237,6 +264,16 @@ mod tests {
         assert_eq!(s.target(), std::fs::canonicalize(&a).unwrap());
         s.discard();
         let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn scene_names_make_safe_short_stems() {
+        assert_eq!(safe_stem("cook-membrane_2.h0.5"), "cook-membrane_2.h0.5");
+        assert_eq!(safe_stem("a b/c\\d"), "a_b_c_d");
+        assert_eq!(safe_stem("../../etc/passwd"), "etc_passwd");
+        assert_eq!(safe_stem(&"\u{1F600}".repeat(100)), "scene");
+        assert_eq!(safe_stem(&"x".repeat(300)).len(), 48);
+        assert_eq!(safe_stem("Ωmega"), "mega");
     }
 
     #[test]

@@ -93,10 +93,13 @@ fn open_scene(scene: Option<&Path>, limits: &Limits) -> Result<Result<(Simulatio
 /// scene's settings. `Ok(Err(code))`: exit 2 for settings the scene does
 /// not allow, 3 when the file cannot be created.
 fn open_recorder(a: &TuiArgs, sim: &Simulation, text: &str) -> Result<Result<Recorder, ExitCode>> {
-    let path = a
-        .record
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("recordings/{}-{}.rrd", sim.model().name, timestamp())));
+    let path = a.record.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "recordings/{}-{}.rrd",
+            mpmlab::output::safe_stem(&sim.model().name),
+            timestamp()
+        ))
+    });
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }

@@ -116,7 +116,11 @@ fn changed_params(sim: &Simulation, cmd: &Command) -> Option<(crate::simulation:
 /// happened, in words.
 fn write_checkpoint(sim: &Simulation, scene_text: &str) -> String {
     let dir = std::path::Path::new("checkpoints");
-    let path = dir.join(format!("{}-step-{:06}.ckpt", sim.model().name, sim.step_index()));
+    let path = dir.join(format!(
+        "{}-step-{:06}.ckpt",
+        crate::output::safe_stem(&sim.model().name),
+        sim.step_index()
+    ));
     let result = std::fs::create_dir_all(dir)
         .map_err(|e| format!("cannot create {}: {e}", dir.display()))
         .and_then(|_| sim.save_checkpoint(&path, scene_text).map_err(|e| e.to_string()));
@@ -140,7 +144,11 @@ fn toggle_vtk(sim: &Simulation, vtk: &mut Option<crate::vtk::VtkExport>) -> Stri
             Err(e) => e.to_string(),
         },
         None => {
-            let dir = std::path::PathBuf::from(format!("vtk/{}-from-step-{}", sim.model().name, sim.step_index()));
+            let dir = std::path::PathBuf::from(format!(
+                "vtk/{}-from-step-{}",
+                crate::output::safe_stem(&sim.model().name),
+                sim.step_index()
+            ));
             match crate::vtk::VtkExport::create(&dir, sim, 1) {
                 Ok(v) => {
                     *vtk = Some(v);

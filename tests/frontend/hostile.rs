@@ -424,6 +424,22 @@ fn cases() -> Vec<Case> {
         "unknown field",
         "ibm[0].speed",
     );
+    // A probe off the grid or outside every body snapped to the nearest
+    // point silently.
+    c.scene(
+        "probe-off-grid",
+        "axial-vibration-implicit",
+        &[("at = [1.0, 0.025]", "at = [5.0, 0.025]")],
+        "outside the grid",
+        "probe[0].at",
+    );
+    c.scene(
+        "probe-outside-bodies",
+        "axial-vibration-implicit",
+        &[("at = [1.0, 0.025]", "at = [1.15, 0.025]")],
+        "outside every body",
+        "probe[0].at",
+    );
     c.scene(
         "key-boundary",
         "thick-cylinder",

@@ -41,10 +41,43 @@ pub(super) fn build(
                 if !at.iter().all(|v| v.is_finite()) {
                     return Err(FieldError::new(f("at"), "must be a finite position"));
                 }
+                let g = &scene.grid;
+                let inside = (0..2).all(|c| at[c] >= g.origin[c] && at[c] <= g.origin[c] + g.size[c]);
+                if !inside {
+                    return Err(FieldError::new(
+                        f("at"),
+                        format!(
+                            "[{}, {}] is outside the grid ([{}, {}] x [{}, {}])",
+                            at[0],
+                            at[1],
+                            g.origin[0],
+                            g.origin[0] + g.size[0],
+                            g.origin[1],
+                            g.origin[1] + g.size[1]
+                        ),
+                    ));
+                }
                 let d2 = |p: usize| (points.x0[p][0] - at[0]).powi(2) + (points.x0[p][1] - at[1]).powi(2);
                 let p = (0..points.len())
                     .min_by(|&a, &b| d2(a).total_cmp(&d2(b)))
                     .ok_or_else(|| FieldError::new(f("at"), "the scene has no material points"))?;
+                // Outside every body: no point with volume within a cell
+                // of the position (the nearest would answer from afar).
+                let reach = (0..points.len())
+                    .filter(|&q| points.vol0[q] > 0.0)
+                    .map(d2)
+                    .fold(f64::INFINITY, f64::min)
+                    .sqrt();
+                if reach > g.h {
+                    return Err(FieldError::new(
+                        f("at"),
+                        format!(
+                            "[{}, {}] is outside every body: the nearest material point is {reach:.3e} m away, \
+                             more than a cell (h = {})",
+                            at[0], at[1], g.h
+                        ),
+                    ));
+                }
                 ProbeTarget::Point(p)
             }
             (None, Some(b), None) => ProbeTarget::Boundary(
