@@ -7,7 +7,8 @@ use clap::Parser;
 use cli::args::{limits, Cli, Cmd, TuiArgs};
 use std::process::ExitCode;
 
-/// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 recording failed,
+/// Exit codes: 0 success, 1 a step failed, 2 bad input, 3 an output cannot
+/// be created or written (the run stops after the step),
 /// 130 interrupted (Ctrl-C or SIGTERM; the recording is closed cleanly; a
 /// second signal ends the process at once, and `mpmlab repair` closes the
 /// recording it leaves).

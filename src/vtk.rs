@@ -157,6 +157,8 @@ impl std::fmt::Display for VtkSummary {
 /// Writes a run's states to a folder as ParaView series.
 pub struct VtkExport {
     dir: PathBuf,
+    /// The folder's lock, held while the series is written.
+    _lock: File,
     every: usize,
     points: Series,
     grid: Series,
@@ -169,10 +171,26 @@ pub struct VtkExport {
     skipped: usize,
 }
 
+/// The lock file of a series folder.
+const LOCK: &str = ".mpmlab-vtk.lock";
+
+/// What a series writes in its folder: anything else is the user's.
+const SERIES_ENTRIES: &[&str] = &[
+    "points.pvd",
+    "grid.pvd",
+    "boundaries.pvd",
+    "ibm.pvd",
+    "points",
+    "grid",
+    "boundaries",
+    "ibm",
+    LOCK,
+];
+
 impl VtkExport {
     /// Create the folder (if needed) and the collections, and write the
     /// initial state. `every`: write every `every`-th step (at least 1).
-    pub fn create(dir: &Path, sim: &Simulation, every: usize) -> Result<VtkExport, VtkError> {
+    pub fn create(dir: &Path, sim: &Simulation, every: usize, force: bool) -> Result<VtkExport, VtkError> {
         let err = |m: String| VtkError::Create {
             dir: dir.to_path_buf(),
             message: m,
@@ -181,10 +199,41 @@ impl VtkExport {
             return Err(err("it exists and is not a directory".into()));
         }
         std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
+        // Another series' files are replaced; anything else is the user's.
+        let mut foreign: Vec<String> = std::fs::read_dir(dir)
+            .map_err(|e| err(e.to_string()))?
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| !SERIES_ENTRIES.contains(&n.as_str()))
+            .collect();
+        if !foreign.is_empty() && !force {
+            foreign.sort();
+            return Err(err(format!(
+                "the folder holds files that are not a ParaView series of this program ({}); \
+                 choose another folder, or --force to write beside them",
+                foreign.iter().take(3).cloned().collect::<Vec<_>>().join(", ")
+            )));
+        }
+        let lock = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(dir.join(LOCK))
+            .map_err(|e| err(e.to_string()))?;
+        match lock.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(err(
+                    "another run is writing a series to it; wait for it or choose another folder".into(),
+                ))
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(err(format!("cannot lock it: {e}"))),
+        }
         let series = |name, ext| Series::create(dir, name, ext).map_err(|e| err(e.to_string()));
         let m = sim.model();
         let mut v = VtkExport {
             dir: dir.to_path_buf(),
+            _lock: lock,
             every: every.max(1),
             points: series("points", "vtu")?,
             grid: series("grid", "vtr")?,

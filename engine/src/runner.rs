@@ -87,6 +87,9 @@ pub enum RunEnd {
     /// `stop` was set: between steps, or during one (the step is cancelled
     /// and the state is that of `after` steps).
     Stopped { after: usize },
+    /// An observer could not write its output (its reason is among the
+    /// detached ones) after `after` steps.
+    OutputFailed { after: usize },
 }
 
 /// Step to the end, the first failure, or until `stop` is set. `stop` also
@@ -114,7 +117,16 @@ pub fn run(
             };
         }
         let s = step(sim, observers);
+        let lost = !s.detached.is_empty();
         detached.extend(s.detached);
+        if lost {
+            // An output that cannot be written (a full disk, a quota, a
+            // vanished folder) ends the run after the step: what was
+            // written stays readable, nothing is silently left out.
+            break RunEnd::OutputFailed {
+                after: sim.step_index(),
+            };
+        }
         match s.result {
             Ok(_) => {}
             Err(StepFailure::Cancelled { .. }) if stop.load(Ordering::SeqCst) => {

@@ -130,9 +130,9 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub resume: Option<PathBuf>,
     /// Replace an existing --record or --csv regular file whatever it
-    /// holds, a stale NAME.partial, and write checkpoints into a folder
-    /// holding other files (never the scene, a folder, a device, FIFO or
-    /// socket).
+    /// holds, a stale NAME.partial, and write checkpoints or a --vtk
+    /// series into a folder holding other files (never the scene, a
+    /// folder, a device, FIFO or socket).
     #[arg(long)]
     pub force: bool,
     #[command(flatten)]
@@ -171,9 +171,9 @@ pub struct VtkArgs {
 impl VtkArgs {
     /// Create the series and write the initial state; exit status 3 (with
     /// the folder and the cause on stderr) when it cannot be written.
-    pub fn open(&self, sim: &Simulation) -> Result<Option<VtkExport>, ExitCode> {
+    pub fn open(&self, sim: &Simulation, force: bool) -> Result<Option<VtkExport>, ExitCode> {
         let Some(dir) = &self.vtk else { return Ok(None) };
-        VtkExport::create(dir, sim, self.vtk_every as usize)
+        VtkExport::create(dir, sim, self.vtk_every as usize, force)
             .map(Some)
             .map_err(|e| {
                 eprintln!("error: {e}");
@@ -323,6 +323,10 @@ pub struct SweepArgs {
     /// `body.0.basis=standard,gimp`, `steps=10,20`, `gamma_k=0,1e5`).
     #[arg(long = "try", value_name = "KEY=V1,V2,...", requires = "target")]
     pub tries: Vec<String>,
+    /// Write into an --out folder that holds files other than a sweep's
+    /// (they are left alone, unless a sweep's file has their name).
+    #[arg(long)]
+    pub force: bool,
     /// Merge the results in this sweep folder (from --emit-jobs runs) and chart them.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["scene", "preset", "vary", "emit_jobs"])]
     pub collect: Option<PathBuf>,

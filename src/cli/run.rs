@@ -28,8 +28,11 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
 /// before the scene is loaded (exit 2).
 fn check_args(args: &RunArgs) -> Result<(), ExitCode> {
     let (path, record, force) = (args.scene.as_path(), args.record.as_deref(), args.force);
-    if force && record.is_none() && args.csv.is_none() && args.checkpoint.is_none() {
-        return Err(fail(2, "--force needs --record FILE, --csv FILE or --checkpoint DIR"));
+    if force && record.is_none() && args.csv.is_none() && args.checkpoint.is_none() && args.vtk.vtk.is_none() {
+        return Err(fail(
+            2,
+            "--force needs --record FILE, --csv FILE, --checkpoint DIR or --vtk DIR",
+        ));
     }
     if record.is_none() && args.cadence.given() {
         return Err(fail(
@@ -139,7 +142,7 @@ impl Outputs {
             },
             None => None,
         };
-        let vtk = match args.vtk.open(sim) {
+        let vtk = match args.vtk.open(sim, args.force) {
             Ok(v) => v,
             Err(code) => {
                 if let Some(r) = recorder {
@@ -232,11 +235,19 @@ fn step_all(sim: &mut Simulation, o: &mut Outputs, table: &mut Table) -> ExitCod
         &mut detached,
     );
     for d in &detached {
-        eprintln!("error: {d}; continuing without it");
+        eprintln!("error: {d}");
         code = ExitCode::from(3);
     }
     match end {
         RunEnd::Finished => {}
+        RunEnd::OutputFailed { after } => {
+            let text = format!("an output cannot be written: the run stops after step {after}");
+            eprintln!("{text}");
+            if let Some(rec) = o.recorder.as_mut() {
+                let _ = rec.event(&text, "ERROR");
+            }
+            code = ExitCode::from(3);
+        }
         RunEnd::Failed(f) => code = fail(1, f),
         RunEnd::Stopped { after } => {
             // The last good state, to resume from.

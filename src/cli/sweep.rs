@@ -131,7 +131,7 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
             eprintln!("error: {}", e.replace("--vary", "--try"));
             return Ok(ExitCode::from(2));
         }
-        return target_search(&name, &path, a.out.clone(), t, a.budget, tries);
+        return target_search(&name, &path, a.out.clone(), t, a.budget, tries, a.force);
     }
     for v in &a.vary {
         varies.push(Vary::parse(v).map_err(anyhow::Error::msg)?);
@@ -174,6 +174,10 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
         return Ok(ExitCode::from(2));
     }
     let folder = Folder(a.out.unwrap_or_else(|| PathBuf::from("sweeps").join(&name)));
+    if let Err(e) = folder.check_ours(a.force) {
+        eprintln!("error: {e}");
+        return Ok(ExitCode::from(2));
+    }
     let runs = driver::prepare(&folder, &base, &fixed, &varies).map_err(anyhow::Error::msg)?;
     let todo = driver::pending(&folder, &runs);
     let exe = std::env::current_exe().context("cannot find the mpmlab executable")?;

@@ -17,6 +17,7 @@ pub fn target_search(
     target: &str,
     budget: f64,
     tries: Vec<mpmlab::sweep::Vary>,
+    force: bool,
 ) -> Result<ExitCode> {
     use mpmlab::scene::Placement;
     use mpmlab::sweep::{driver, target, Folder};
@@ -69,6 +70,10 @@ pub fn target_search(
         .then(|| scene.bodies.first().map(|b| b.points_per_cell))
         .flatten();
     let folder = Folder(out.unwrap_or_else(|| PathBuf::from("sweeps").join(format!("{name}-target"))));
+    if let Err(e) = folder.check_ours(force) {
+        eprintln!("error: {e}");
+        return Ok(ExitCode::from(2));
+    }
     let exe = std::env::current_exe().context("cannot find the mpmlab executable")?;
     out!(
         "searching {} for {} <= {:e} within {budget} s of runs, in {}",

@@ -65,6 +65,7 @@
 
 pub mod layout;
 pub mod repair;
+mod sink;
 pub mod sweep;
 
 use crate::colormap;
@@ -164,7 +165,14 @@ struct FrameWriter {
     spare: Receiver<Frame>,
     thread: Option<JoinHandle<()>>,
     error: Arc<Mutex<Option<String>>>,
+    /// A flush did not answer within [`SYNC_LIMIT`].
+    stalled: std::sync::atomic::AtomicBool,
 }
+
+/// The longest the engine's side waits for a flush of the recording: a
+/// disk that takes nothing for this long ends the run (with the reason)
+/// instead of hanging it.
+const SYNC_LIMIT: std::time::Duration = std::time::Duration::from_secs(60);
 
 impl FrameWriter {
     fn start(rec: RecordingStream, grid: crate::grid::Grid, legend: ColourBar) -> FrameWriter {
@@ -212,6 +220,7 @@ impl FrameWriter {
             spare,
             thread,
             error,
+            stalled: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
@@ -233,12 +242,30 @@ impl FrameWriter {
         if tx.send(Job::Flush(done)).is_err() {
             return (stopped(), zero);
         }
-        answer.recv().unwrap_or_else(|_| (stopped(), zero))
+        match answer.recv_timeout(SYNC_LIMIT) {
+            Ok(a) => a,
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                // A stalled disk: the run ends with the reason instead of
+                // waiting on; the thread is not waited for again.
+                self.stalled.store(true, std::sync::atomic::Ordering::SeqCst);
+                (
+                    Some(format!(
+                        "the recording's file took no data for {} s (a stalled or unreachable disk?)",
+                        SYNC_LIMIT.as_secs()
+                    )),
+                    SYNC_LIMIT,
+                )
+            }
+            Err(mpsc::RecvTimeoutError::Disconnected) => (stopped(), zero),
+        }
     }
 
     /// Wait for every frame sent to be logged.
     fn join(&mut self) -> Option<String> {
         self.frames = None;
+        if self.stalled.load(std::sync::atomic::Ordering::SeqCst) {
+            return Some(self.error().unwrap_or_else(|| "the recording's file stalled".into()));
+        }
         if let Some(t) = self.thread.take() {
             if t.join().is_err() {
                 return Some("the recorder's thread panicked".into());
@@ -464,6 +491,8 @@ fn contents(sim: &Simulation, colour: Field) -> Contents {
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
+    /// The file the stream writes, closed by [`Recorder::finish`].
+    sink: Arc<sink::Shared>,
     /// The recording's path as given; it is written as `staged`'s
     /// `.partial` file until [`Recorder::finish`].
     path: PathBuf,
@@ -581,7 +610,17 @@ impl Recorder {
         if deterministic {
             builder = builder.recording_id("mpmlab-test");
         }
-        let rec = match builder.save(&partial) {
+        // rerun's own file sink hangs a flush after a write error: ours
+        // returns it ([`sink`]).
+        let shared = match sink::Shared::create(&partial) {
+            Ok(s) => s,
+            Err(e) => {
+                staged.discard();
+                return Err(err(e));
+            }
+        };
+        let sinks: Vec<Box<dyn rerun::sink::LogSink>> = vec![Box::new(sink::Sink(shared.clone()))];
+        let rec = match builder.set_sinks(sinks) {
             Ok(rec) => rec,
             Err(e) => {
                 staged.discard();
@@ -605,6 +644,7 @@ impl Recorder {
         let writer = FrameWriter::start(rec.clone(), sim.model().grid.clone(), legend.clone());
         let mut r = Recorder {
             rec,
+            sink: shared,
             path: path.to_path_buf(),
             staged: Some(staged),
             iteration: 0,
@@ -624,27 +664,42 @@ impl Recorder {
             last_sync: std::time::Instant::now(),
             sync_cost: None,
         };
-        let contents = contents(sim, colour);
-        r.check(
-            contents
-                .blueprint()
-                .send(&r.rec, rerun::blueprint::BlueprintActivation::default()),
-        )?;
-        r.log_styles(&contents)?;
-        r.log_static(scene_text, sim, &legend)?;
-        r.log_state(sim)?;
-        r.event(
-            &format!(
-                "start: scene `{}`, {} points, {} load steps; points recorded {}",
-                sim.model().name,
-                sim.points().len(),
-                sim.load_steps(),
-                r.cadence()
-            ),
-            rerun::TextLogLevel::INFO,
-        )?;
-        r.sync()?;
+        // A recording that cannot take its header and first state (a
+        // full disk already) is removed: the run has not started.
+        let opened = (|| {
+            let contents = contents(sim, colour);
+            r.check(
+                contents
+                    .blueprint()
+                    .send(&r.rec, rerun::blueprint::BlueprintActivation::default()),
+            )?;
+            r.log_styles(&contents)?;
+            r.log_static(scene_text, sim, &legend)?;
+            r.log_state(sim)?;
+            r.event(
+                &format!(
+                    "start: scene `{}`, {} points, {} load steps; points recorded {}",
+                    sim.model().name,
+                    sim.points().len(),
+                    sim.load_steps(),
+                    r.cadence()
+                ),
+                rerun::TextLogLevel::INFO,
+            )?;
+            r.sync()?;
+            Ok(())
+        })();
+        if let Err(e) = opened {
+            r.discard();
+            return Err(e);
+        }
         Ok(r)
+    }
+
+    /// The temporary file the recording is written to until it is
+    /// finished.
+    fn partial(&self) -> Option<&Path> {
+        self.staged.as_ref().map(|s| s.partial())
     }
 
     pub fn path(&self) -> &Path {
@@ -1148,6 +1203,7 @@ impl Recorder {
         if let Err(e) = self.rec.flush_blocking() {
             return Err(kept(&self.path, partial.as_deref(), e.to_string()));
         }
+        let shared = self.sink.clone();
         let size = RecordingSize {
             bytes: 0,
             steps: self.steps.len(),
@@ -1156,8 +1212,12 @@ impl Recorder {
         };
         let path = self.path.clone();
         let staged = self.staged.take();
-        // The file sink writes its footer when the last handle goes.
+        // The stream closed, every message is with the sink: the footer,
+        // and the file synced to disk before it takes its name.
         drop(self);
+        if let Err(e) = shared.finish() {
+            return Err(kept(&path, partial.as_deref(), e));
+        }
         if let Some(s) = staged {
             s.commit().map_err(|message| RecordError::Write {
                 path: path.clone(),
@@ -1173,17 +1233,33 @@ impl Recorder {
 /// detaches it with the reason (the run goes on unrecorded).
 impl crate::runner::Observer for Recorder {
     fn stepped(&mut self, sim: &Simulation, report: &StepReport) -> Option<String> {
-        self.log_step(report, sim)
-            .err()
-            .map(|e| format!("recording stopped: {e}"))
+        let r = self.log_step(report, sim);
+        self.stopped(r)
     }
     fn failed(&mut self, sim: &Simulation, failure: &StepFailure) -> Option<String> {
-        self.log_failure(failure, sim)
-            .err()
-            .map(|e| format!("recording stopped: {e}"))
+        let r = self.log_failure(failure, sim);
+        self.stopped(r)
     }
     fn note(&mut self, text: &str, level: &str) -> Option<String> {
-        self.event(text, level).err().map(|e| format!("recording stopped: {e}"))
+        let r = self.event(text, level);
+        self.stopped(r)
+    }
+}
+
+impl Recorder {
+    /// The message of a recorder that stops following the run (it is
+    /// dropped next): the error and where what was written is kept.
+    fn stopped(&self, r: Result<(), RecordError>) -> Option<String> {
+        let e = r.err()?;
+        Some(match self.partial() {
+            Some(p) => format!(
+                "recording stopped: {e}; what was written is kept as {} (mpmlab repair {} {})",
+                p.display(),
+                p.display(),
+                self.path.display()
+            ),
+            None => format!("recording stopped: {e}"),
+        })
     }
 }
 

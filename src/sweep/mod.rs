@@ -869,7 +869,66 @@ pub const DIED: &str = "the run process ended without a result";
 /// Where a sweep keeps its files.
 pub struct Folder(pub PathBuf);
 
+/// What a sweep writes in its folder: anything else is the user's.
+const SWEEP_ENTRIES: &[&str] = &[
+    "runs",
+    "results",
+    "recordings",
+    "charts",
+    "runs.txt",
+    "sweep.csv",
+    "estimates.csv",
+    "sweep.rrd",
+    "jobs.txt",
+];
+
 impl Folder {
+    /// Whether the sweep may write here: a folder that does not exist or
+    /// is empty, or one a sweep made (its `runs/` and `results/`, nothing
+    /// but what a sweep writes), which it goes on with. A folder of other
+    /// files (a user's `sweep.csv` or `charts/` among them) is refused
+    /// unless `force`; a file is refused always.
+    pub fn check_ours(&self, force: bool) -> Result<(), String> {
+        let d = &self.0;
+        if d.exists() && !d.is_dir() {
+            return Err(format!("--out {} is not a folder", d.display()));
+        }
+        let Ok(entries) = std::fs::read_dir(d) else {
+            return Ok(());
+        };
+        let names: Vec<String> = entries
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        if names.is_empty() || force {
+            return Ok(());
+        }
+        let made = self.runs().is_dir() && self.results().is_dir();
+        let mut foreign: Vec<&String> = names.iter().filter(|n| !SWEEP_ENTRIES.contains(&n.as_str())).collect();
+        if foreign.is_empty() && made {
+            return Ok(());
+        }
+        foreign.sort();
+        Err(format!(
+            "--out {} holds files that are not a sweep's{}: a sweep there would replace or mix with them; \
+             choose another folder, or --force",
+            d.display(),
+            if foreign.is_empty() {
+                " (no runs/ and results/ of an earlier sweep)".to_string()
+            } else {
+                format!(
+                    " ({})",
+                    foreign
+                        .iter()
+                        .take(3)
+                        .map(|s| s.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        ))
+    }
+
     pub fn runs(&self) -> PathBuf {
         self.0.join("runs")
     }

@@ -149,7 +149,7 @@ fn toggle_vtk(sim: &Simulation, vtk: &mut Option<crate::vtk::VtkExport>) -> Stri
                 crate::output::safe_stem(&sim.model().name),
                 sim.step_index()
             ));
-            match crate::vtk::VtkExport::create(&dir, sim, 1) {
+            match crate::vtk::VtkExport::create(&dir, sim, 1, false) {
                 Ok(v) => {
                     *vtk = Some(v);
                     format!(

@@ -1899,6 +1899,145 @@ fn a_checkpoint_folder_with_other_files_is_refused_unless_forced() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `mpmlab ARGS` in `dir` with files limited to `blocks` 512-byte blocks
+/// and SIGXFSZ ignored, so a write past the limit fails with EFBIG as a
+/// full disk fails with ENOSPC (no mount needed); killed if it takes more
+/// than a minute (it hung for ever on a full disk).
+fn with_file_limit(dir: &Path, blocks: u64, args: &[&str]) -> (i32, String) {
+    let mut cmd = format!(
+        "ulimit -f {blocks}; trap '' XFSZ; exec '{}'",
+        env!("CARGO_BIN_EXE_mpmlab")
+    );
+    for a in args {
+        cmd.push_str(&format!(" '{a}'"));
+    }
+    let mut child = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(&cmd)
+        .current_dir(dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+            return (status.code().unwrap_or(-1), err);
+        }
+        if start.elapsed() > std::time::Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("mpmlab {args:?} hung on a full file system");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_full_disk_ends_the_run_with_what_was_written_readable() {
+    let dir = temp_path("hostile-full-disk", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = dir.to_str().unwrap();
+    let scene = std::path::absolute(scene_path("ghost-collision-plastic")).unwrap();
+    let scene = scene.to_str().unwrap();
+    // The recording fills the limit first (512 kB) mid-run: exit 3, the
+    // step named, the partial file kept and repairable to that step.
+    let (code, err) = with_file_limit(
+        &dir,
+        1000,
+        &["run", scene, "--record", "run.rrd", "--csv", "run.csv", "--quiet"],
+    );
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("cannot write") && err.contains("run.rrd.partial"), "{err}");
+    let after: i64 = err
+        .split("the run stops after step ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no step named: {err}"));
+    assert!(after > 0 && after < 1000, "{err}");
+    assert!(!dir.join("run.rrd").exists(), "a recording that failed took its name");
+    let (code, out, e) = mpmlab(&["repair", &format!("{d}/run.rrd.partial"), &format!("{d}/fixed.rrd")]);
+    assert_eq!(code, 0, "{e}");
+    assert!(out.contains(&format!("data up to step {after}")), "{out}");
+    // A checkpoint that does not fit: the run stops there and no half
+    // checkpoint is left (the limit is per file, so here the first one
+    // already fails; any whole one there resumes).
+    let ck = dir.join("ck");
+    let (code, err) = with_file_limit(
+        &dir,
+        1000,
+        &["run", scene, "--checkpoint", "ck", "--checkpoint-every", "5", "--quiet"],
+    );
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("cannot write checkpoint"), "{err}");
+    let names: Vec<String> = std::fs::read_dir(&ck)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!names.iter().any(|n| n.ends_with(".partial")), "{names:?}");
+    for n in names.iter().filter(|n| n.ends_with(".ckpt")) {
+        let (code, _, e) = mpmlab(&["run", scene, "--resume", &format!("{}/{n}", ck.display()), "--quiet"]);
+        assert_eq!(code, 0, "{n}: {e}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sweep_and_series_folders_with_other_files_are_refused_unless_forced() {
+    let dir = temp_path("hostile-foreign-folders", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("sweep.csv"), b"my own table").unwrap();
+    let d = dir.to_str().unwrap();
+    // A user's sweep.csv in the --out folder was silently replaced.
+    let (code, _, err) = mpmlab(&[
+        "sweep",
+        "scenarios/patch-compression.toml",
+        "--out",
+        d,
+        "--vary",
+        "h=0.5",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a sweep's") && err.contains("--force"), "{err}");
+    assert_eq!(std::fs::read(dir.join("sweep.csv")).unwrap(), b"my own table");
+    // A ParaView folder holding the user's file.
+    let (code, _, err) = mpmlab(&["run", "scenarios/patch-compression.toml", "--quiet", "--vtk", d]);
+    assert_eq!(code, 3, "{err}");
+    assert!(
+        err.contains("not a ParaView series") && err.contains("sweep.csv"),
+        "{err}"
+    );
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--quiet",
+        "--vtk",
+        d,
+        "--force",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(dir.join("sweep.csv")).unwrap(), b"my own table");
+    assert!(dir.join("points.pvd").exists());
+    // A sweep's own folder is gone on with: run twice, the second finds
+    // its runs done.
+    let own = dir.join("own");
+    let o = own.to_str().unwrap();
+    for _ in 0..2 {
+        let (code, _, err) = mpmlab(&[
+            "sweep",
+            "scenarios/patch-compression.toml",
+            "--out",
+            o,
+            "--vary",
+            "h=0.5",
+        ]);
+        assert_eq!(code, 0, "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn sweeps_reject_bad_settings_before_running() {
     let dir = temp_path("hostile-sweep", "d");

@@ -107,7 +107,11 @@ impl Simulation {
                 )));
             }
         }
-        std::fs::write(&tmp, &bytes).map_err(|e| err(crate::scene::io_reason(&e)))?;
+        if let Err(e) = std::fs::write(&tmp, &bytes) {
+            // A full disk leaves no half checkpoint beside the whole ones.
+            let _ = std::fs::remove_file(&tmp);
+            return Err(err(crate::scene::io_reason(&e)));
+        }
         std::fs::rename(&tmp, path).map_err(|e| err(crate::scene::io_reason(&e)))
     }
 
