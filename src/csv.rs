@@ -27,6 +27,8 @@ pub struct CsvWriter {
     initial: Option<Vec<ProbeValue>>,
     start: (usize, f64),
     header: Vec<String>,
+    /// The columns of a table whose run takes no step.
+    empty: StepReport,
 }
 
 impl CsvWriter {
@@ -50,6 +52,7 @@ impl CsvWriter {
             initial: Some(sim.probe_values(None)),
             start: (sim.step_index(), sim.time().unwrap_or(sim.load_factor())),
             header: Vec::new(),
+            empty: sim.start_report(),
         })
     }
 
@@ -70,8 +73,15 @@ impl CsvWriter {
     /// `.partial`, with every row written so far.
     pub fn finish(mut self) -> Result<(), String> {
         let partial = self.staged.as_ref().map(|s| s.partial().display().to_string());
-        self.out
-            .flush()
+        // A run that took no step (resumed from its last checkpoint) still
+        // gets the header and the row of where it stands.
+        let head = if self.initial.is_some() {
+            let r = self.empty.clone();
+            self.write_head(&r)
+        } else {
+            Ok(())
+        };
+        head.and_then(|()| self.out.flush())
             .and_then(|()| self.out.get_ref().sync_all())
             .map_err(|e| {
                 format!(
@@ -87,6 +97,25 @@ impl CsvWriter {
     }
 
     fn write_row(&mut self, r: &StepReport) -> std::io::Result<()> {
+        self.write_head(r)?;
+        let cols = columns(r, self.units);
+        // A step whose columns differ from the header's (cannot happen for
+        // one scene; kept honest rather than misaligned).
+        let names: Vec<&String> = cols.iter().map(|c| &c.0).collect();
+        if names != self.header.iter().collect::<Vec<_>>() {
+            return Err(std::io::Error::other(format!(
+                "step {} has other columns than step 1",
+                r.step
+            )));
+        }
+        let row: Vec<String> = cols.into_iter().map(|(_, v)| field(&v)).collect();
+        writeln!(self.out, "{}", row.join(","))?;
+        self.out.flush()
+    }
+
+    /// The header (the columns of `r`) and the row of where the run
+    /// starts, before the first row.
+    fn write_head(&mut self, r: &StepReport) -> std::io::Result<()> {
         let cols = columns(r, self.units);
         if let Some(initial) = self.initial.take() {
             self.header = cols.iter().map(|c| c.0.clone()).collect();
@@ -114,18 +143,7 @@ impl CsvWriter {
                 .collect();
             writeln!(self.out, "{}", zero.join(","))?;
         }
-        // A step whose columns differ from the header's (cannot happen for
-        // one scene; kept honest rather than misaligned).
-        let names: Vec<&String> = cols.iter().map(|c| &c.0).collect();
-        if names != self.header.iter().collect::<Vec<_>>() {
-            return Err(std::io::Error::other(format!(
-                "step {} has other columns than step 1",
-                r.step
-            )));
-        }
-        let row: Vec<String> = cols.into_iter().map(|(_, v)| field(&v)).collect();
-        writeln!(self.out, "{}", row.join(","))?;
-        self.out.flush()
+        Ok(())
     }
 }
 

@@ -452,6 +452,16 @@ impl Simulation {
         Ok(reports)
     }
 
+    /// A report of the current state with no step behind it (its step,
+    /// load factor and probes): what a table starts from when a run
+    /// takes no step (resumed from its last checkpoint).
+    pub fn start_report(&self) -> StepReport {
+        StepReport {
+            probes: self.probe_values(None),
+            ..StepReport::new(self.state.step, self.load_steps(), self.load_factor())
+        }
+    }
+
     /// The names of the errors a step reports against the scene's exact
     /// solution (none without one).
     pub fn error_names(&self) -> Vec<String> {

@@ -26,7 +26,24 @@ fn collect(dir: &Path) -> Result<ExitCode> {
         return Ok(ExitCode::from(2));
     }
     let found = folder.collect();
-    let missing: Vec<&String> = order.iter().filter(|id| !found.contains_key(*id)).collect();
+    // A result file that does not read as one is named as damaged, not
+    // passed over as a run not done.
+    let (damaged, missing): (Vec<&String>, Vec<&String>) = order
+        .iter()
+        .filter(|id| !found.contains_key(*id))
+        .partition(|id| folder.result(id).exists());
+    if !damaged.is_empty() {
+        eprintln!(
+            "warning: {} result file{} cannot be read (damaged; the run is done again by the sweep): {}",
+            damaged.len(),
+            if damaged.len() == 1 { "" } else { "s" },
+            damaged
+                .iter()
+                .map(|id| folder.result(id).display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let listed = |ids: &[&String]| {
         let mut s = ids.iter().take(10).map(|s| s.as_str()).collect::<Vec<_>>().join(", ");
         if ids.len() > 10 {

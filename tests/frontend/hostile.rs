@@ -2039,6 +2039,58 @@ fn sweep_and_series_folders_with_other_files_are_refused_unless_forced() {
 }
 
 #[test]
+fn a_run_with_no_step_left_writes_its_table_and_damaged_results_are_named() {
+    let dir = temp_path("hostile-no-step", "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = dir.to_str().unwrap();
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--quiet",
+        "--checkpoint",
+        &format!("{d}/ck"),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    // Resumed from the last checkpoint: no step to take; the table still
+    // has its header and the row of where the run stands (it was empty).
+    let (code, _, err) = mpmlab(&[
+        "run",
+        "scenarios/patch-compression.toml",
+        "--quiet",
+        "--resume",
+        &format!("{d}/ck/step-000001.ckpt"),
+        "--csv",
+        &format!("{d}/end.csv"),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let t = std::fs::read_to_string(dir.join("end.csv")).unwrap();
+    let lines: Vec<&str> = t.lines().collect();
+    assert!(
+        lines.len() == 2 && lines[0].starts_with("step,load_factor,") && lines[1].starts_with("1,"),
+        "{t}"
+    );
+    // A damaged result file in a sweep folder is named as such.
+    let sw = format!("{d}/sw");
+    let (code, _, err) = mpmlab(&[
+        "sweep",
+        "scenarios/patch-compression.toml",
+        "--out",
+        &sw,
+        "--vary",
+        "h=0.5,0.25",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::write(dir.join("sw/results/h=0.25.csv"), "garbage").unwrap();
+    std::fs::remove_file(dir.join("sw/sweep.csv")).unwrap();
+    let (_, _, err) = mpmlab(&["sweep", "--collect", &sw]);
+    assert!(
+        err.contains("cannot be read (damaged") && err.contains("h=0.25.csv"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn sweeps_reject_bad_settings_before_running() {
     let dir = temp_path("hostile-sweep", "d");
     let out = dir.to_str().unwrap();
