@@ -110,11 +110,22 @@ impl Series {
         // vtkio's own `export` drops its buffered writer unflushed (an
         // error at the last flush, a full disk, would go unnoticed), so the
         // file is written and flushed here.
-        let file = File::create(&path).map_err(|e| werr(&path, e.to_string()))?;
-        let mut w = BufWriter::new(file);
-        vtk.write_xml(&mut w).map_err(|e| werr(&path, e.to_string()))?;
-        let file = w.into_inner().map_err(|e| werr(&path, e.error().to_string()))?;
-        let bytes = file.metadata().map(|m| m.len()).unwrap_or(0);
+        // Written as `FILE.partial` and renamed: the collection lists
+        // whole files only, and a write error leaves no half file.
+        let partial = crate::output::partial_of(&path);
+        let written = (|| {
+            let file = File::create(&partial).map_err(|e| e.to_string())?;
+            let mut w = BufWriter::new(file);
+            vtk.write_xml(&mut w).map_err(|e| e.to_string())?;
+            let file = w.into_inner().map_err(|e| e.error().to_string())?;
+            let bytes = file.metadata().map(|m| m.len()).unwrap_or(0);
+            std::fs::rename(&partial, &path).map_err(|e| e.to_string())?;
+            Ok::<u64, String>(bytes)
+        })();
+        let bytes = written.map_err(|e| {
+            let _ = std::fs::remove_file(&partial);
+            werr(&path, e)
+        })?;
         let entry = format!("    <DataSet timestep=\"{time}\" group=\"\" part=\"0\" file=\"{rel}\"/>\n");
         let pvd_err = |e: std::io::Error| werr(&self.pvd_path, e.to_string());
         self.pvd.seek(SeekFrom::Start(self.tail)).map_err(pvd_err)?;

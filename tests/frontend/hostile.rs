@@ -1977,6 +1977,17 @@ fn a_full_disk_ends_the_run_with_what_was_written_readable() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert!(!names.iter().any(|n| n.ends_with(".partial")), "{names:?}");
+    // A ParaView series: exit 3 and no half file in its folders.
+    let (code, err) = with_file_limit(&dir, 300, &["run", scene, "--vtk", "series", "--quiet"]);
+    assert_eq!(code, 3, "{err}");
+    for sub in ["series", "series/points", "series/grid"] {
+        if let Ok(entries) = std::fs::read_dir(dir.join(sub)) {
+            for e in entries {
+                let n = e.unwrap().file_name().to_string_lossy().into_owned();
+                assert!(!n.ends_with(".partial"), "{sub}/{n}: {err}");
+            }
+        }
+    }
     for n in names.iter().filter(|n| n.ends_with(".ckpt")) {
         let (code, _, e) = mpmlab(&["run", scene, "--resume", &format!("{}/{n}", ck.display()), "--quiet"]);
         assert_eq!(code, 0, "{n}: {e}");
