@@ -486,7 +486,8 @@ load_steps = 3
         let bytes = std::fs::read(&file).unwrap();
         let header = MAGIC.len() + 4 + 16;
         let record: Record = ciborium::from_reader(&bytes[header..]).unwrap();
-        let edits: [(&str, fn(&mut Record)); 5] = [
+        type Edit = fn(&mut Record);
+        let edits: [(&str, Edit); 5] = [
             ("`points.vol` of entry 3 is -1.0", |r| r.state.points.vol[3] = -1.0),
             ("`params.delta_over_h` is NaN", |r| r.params.delta_over_h = f64::NAN),
             ("`params.gamma_k` is -1000000000000000000000000000000", |r| {
