@@ -418,9 +418,15 @@ fn run_text(text: &str, file: &str, record: Option<&Path>) -> RunResult {
         Some(Ok(rec)) => Some(rec),
         None => None,
     };
-    if let RunEnd::Failed(f) = runner::run(&mut sim, &mut [&mut r, &mut recorder], &never, &mut Vec::new()) {
-        r.failed_step = f.step();
-        r.failure = one_line(&f);
+    let mut lost = Vec::new();
+    match runner::run(&mut sim, &mut [&mut r, &mut recorder], &never, &mut lost) {
+        RunEnd::Failed(f) => {
+            r.failed_step = f.step();
+            r.failure = one_line(&f);
+        }
+        // The recording could not be written: the run stopped there.
+        RunEnd::OutputFailed { after } => r.failure = format!("after step {after}: {}", lost.join("; ")),
+        RunEnd::Finished | RunEnd::Stopped { .. } => {}
     }
     if let Some(mut rec) = recorder {
         let _ = rec.log_final_state(&sim);
