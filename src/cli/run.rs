@@ -91,6 +91,19 @@ fn print_scene(sim: &Simulation) {
         if sim.time().is_some() { "time" } else { "load" },
         u.describe()
     );
+    // The von Mises strength in the three ways of saying it, so a reader
+    // of the key they gave sees what the others are.
+    for mat in &m.materials {
+        if let Some(st) = mat.strength {
+            let [r, s, c] = st.all();
+            let p = u.of(Quantity::Stress);
+            out!(
+                "material `{}`: von Mises, {} given: rho_y = sqrt(2 J2) = {r:.6e} {p}, sigma_y (uniaxial) = {s:.6e} {p}, c_u (shear) = {c:.6e} {p}",
+                mat.name,
+                st.key()
+            );
+        }
+    }
 }
 
 /// What a run writes besides the table, each only when asked for.

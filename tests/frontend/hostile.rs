@@ -424,6 +424,44 @@ fn cases() -> Vec<Case> {
         "unknown field",
         "ibm[0].speed",
     );
+    // The von Mises strength: the old key (read as uniaxial, it was G's
+    // radius), two of the three, none, a negative one, one on an elastic
+    // material.
+    c.scene(
+        "strength-old-key",
+        "collapse-von-mises",
+        &[("rho_y = 20.0e3", "yield_stress = 20.0e3")],
+        "write rho_y = 2e4",
+        "material[0].yield_stress",
+    );
+    c.scene(
+        "strength-two-keys",
+        "collapse-von-mises",
+        &[("rho_y = 20.0e3", "rho_y = 20.0e3\nsigma_y = 1.0e4")],
+        "give one of rho_y, sigma_y and c_u",
+        "material[0].sigma_y",
+    );
+    c.scene(
+        "strength-none",
+        "collapse-von-mises",
+        &[("rho_y = 20.0e3", "")],
+        "von Mises needs its strength",
+        "material[0].rho_y",
+    );
+    c.scene(
+        "strength-negative",
+        "collapse-von-mises",
+        &[("rho_y = 20.0e3", "c_u = -1.0")],
+        "must be positive",
+        "material[0].c_u",
+    );
+    c.scene(
+        "strength-elastic",
+        "patch-compression",
+        &[("nu = 0.3", "nu = 0.3\nsigma_y = 1.0e4")],
+        "only for model",
+        "material[0].sigma_y",
+    );
     // A probe off the grid or outside every body snapped to the nearest
     // point silently.
     c.scene(

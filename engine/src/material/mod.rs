@@ -55,6 +55,8 @@ pub struct Material {
     pub elastic: LinearElastic,
     /// Von Mises yield strength `rho_y = sqrt(2 J2)` (Pa); `None`: elastic.
     pub yield_stress: Option<f64>,
+    /// How the scene gave the strength (`rho_y`, `sigma_y` or `c_u`).
+    pub strength: Option<crate::scene::Strength>,
 }
 
 impl Material {

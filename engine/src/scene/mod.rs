@@ -141,7 +141,7 @@ pub enum MaterialModel {
     #[default]
     LinearElastic,
     /// Hencky elasticity with von Mises perfect plasticity (finite
-    /// deformation analysis only); needs `yield_stress`.
+    /// deformation analysis only); needs one of `rho_y`, `sigma_y`, `c_u`.
     VonMises,
 }
 
@@ -160,9 +160,56 @@ pub struct MaterialSpec {
     pub density: f64,
     #[serde(default)]
     pub plane: Plane,
-    /// Von Mises yield strength `rho_y = sqrt(2 J2)` of the Kirchhoff stress (Pa).
+    /// Von Mises strength as G's radius `rho_y = sqrt(2 J2)` of the
+    /// Kirchhoff stress at yield (Pa); or give one of:
+    #[serde(default)]
+    pub rho_y: Option<f64>,
+    /// the uniaxial yield stress `sigma_y` (Pa; `rho_y = sqrt(2/3)
+    /// sigma_y`), or
+    #[serde(default)]
+    pub sigma_y: Option<f64>,
+    /// the undrained shear strength `c_u` (Pa; yield in pure shear,
+    /// `rho_y = sqrt(2) c_u`).
+    #[serde(default)]
+    pub c_u: Option<f64>,
+    /// The old key, read only to be refused with the way to say it now
+    /// (it was `rho_y`, which a reader takes for `sigma_y`).
     #[serde(default)]
     pub yield_stress: Option<f64>,
+}
+
+/// How a von Mises strength was given, for the run's header.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Strength {
+    RhoY(f64),
+    SigmaY(f64),
+    CU(f64),
+}
+
+impl Strength {
+    /// G's radius `rho_y = sqrt(2 J2)` at yield (Pa).
+    pub fn rho_y(self) -> f64 {
+        match self {
+            Strength::RhoY(r) => r,
+            Strength::SigmaY(s) => (2.0f64 / 3.0).sqrt() * s,
+            Strength::CU(c) => 2f64.sqrt() * c,
+        }
+    }
+
+    /// The three ways of saying it: `rho_y`, `sigma_y`, `c_u` (Pa).
+    pub fn all(self) -> [f64; 3] {
+        let r = self.rho_y();
+        [r, (1.5f64).sqrt() * r, r / 2f64.sqrt()]
+    }
+
+    /// The key it was given by.
+    pub fn key(self) -> &'static str {
+        match self {
+            Strength::RhoY(_) => "rho_y",
+            Strength::SigmaY(_) => "sigma_y",
+            Strength::CU(_) => "c_u",
+        }
+    }
 }
 
 /// Where a body's points go inside each cell.

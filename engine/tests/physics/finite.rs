@@ -18,7 +18,7 @@ fn global_tangent_matches_finite_differences() {
             s.analysis.gamma_k = gamma;
             if let Some(y) = yield_stress {
                 s.materials[0].model = mpmlab_engine::scene::MaterialModel::VonMises;
-                s.materials[0].yield_stress = Some(y);
+                s.materials[0].rho_y = Some(y);
             }
         });
         let e = sim.tangent_check(0.05).unwrap();
@@ -109,7 +109,7 @@ fn tangent_of_every_contribution_matches_finite_differences() {
             "F-bar, von Mises footing (IBM, yielding)",
             sim_with("rigid-footing-large", |s| {
                 s.analysis.fbar = true;
-                s.materials[0].yield_stress = Some(1.0e3);
+                s.materials[0].rho_y = Some(1.0e3);
             }),
         ),
         (
