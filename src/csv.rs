@@ -149,9 +149,14 @@ impl CsvWriter {
 
 impl Observer for CsvWriter {
     fn stepped(&mut self, _sim: &Simulation, r: &StepReport) -> Option<String> {
-        self.write_row(r)
-            .err()
-            .map(|e| format!("CSV file {}: {e}", self.path.display()))
+        self.write_row(r).err().map(|e| match &self.staged {
+            Some(s) => format!(
+                "CSV file {}: {e} (the rows written so far are kept in {})",
+                self.path.display(),
+                s.partial().display()
+            ),
+            None => format!("CSV file {}: {e}", self.path.display()),
+        })
     }
     fn failed(&mut self, _sim: &Simulation, _f: &StepFailure) -> Option<String> {
         self.out

@@ -1674,6 +1674,10 @@ fn files_that_are_not_scenes_are_refused_before_reading() {
     let (code, out, _) = mpmlab(&["list", dir.to_str().unwrap()]);
     assert_eq!(code, 0);
     assert!(out.contains("not a regular file"), "{out}");
+    // `repair` of a FIFO blocked for ever opening it.
+    let (code, _, err) = mpmlab(&["repair", fifo.to_str().unwrap(), dir.join("out.rrd").to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
 
     // A directory, a device, a missing file, an oversized file.
     let (code, _, err) = run(&dir);
@@ -2015,6 +2019,24 @@ fn a_full_disk_ends_the_run_with_what_was_written_readable() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert!(!names.iter().any(|n| n.ends_with(".partial")), "{names:?}");
+    // A sweep recording its runs: the child whose recording fills the
+    // limit is a row with the reason (the sweep hung in its first child).
+    let (code, err) = with_file_limit(
+        &dir,
+        1000,
+        &[
+            "sweep",
+            scene,
+            "--out",
+            "sw",
+            "--vary",
+            "analysis.load_steps=200",
+            "--record",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let table = std::fs::read_to_string(dir.join("sw/sweep.csv")).unwrap();
+    assert!(table.contains("cannot write"), "{table}");
     // A ParaView series: exit 3 and no half file in its folders.
     let (code, err) = with_file_limit(&dir, 300, &["run", scene, "--vtk", "series", "--quiet"]);
     assert_eq!(code, 3, "{err}");
