@@ -23,6 +23,7 @@ fn main() -> ExitCode {
         Some(Cmd::Verify(args)) => cli::verify::verify(&args),
         Some(Cmd::Repair { input, output, force }) => Ok(cli::repair::repair(&input, &output, force)),
         Some(Cmd::Tui(args)) => cli::tui::tui(&args),
+        Some(Cmd::RepairProbe { input }) => Ok(cli::repair::probe(&input)),
         None => cli::tui::tui(&TuiArgs::default()),
     };
     match result {

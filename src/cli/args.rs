@@ -63,6 +63,10 @@ pub enum Cmd {
     },
     /// Step a scene interactively in the terminal.
     Tui(TuiArgs),
+    /// Decode a recording's messages as `repair` would, one `ok K` line
+    /// after each (run by `repair` in a process of its own).
+    #[command(hide = true)]
+    RepairProbe { input: PathBuf },
 }
 
 /// Arguments of `mpmlab tui` (and of `mpmlab` with none).

@@ -63,6 +63,13 @@ impl std::fmt::Display for Repaired {
         if let Some(s) = self.last_step {
             write!(f, ", data up to step {s}")?;
         }
+        if let Some(s) = &self.stopped {
+            return write!(
+                f,
+                "; stopped at a damaged message: dropped {} bytes from it on ({s})",
+                self.dropped_bytes
+            );
+        }
         if self.complete {
             write!(f, "; the recording was complete")?;
         } else if self.dropped_bytes == 0 {
@@ -168,23 +175,130 @@ fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
     })
 }
 
+/// What a pass over the messages kept: how many, the last step their data
+/// reach, and why it stopped early, if it did.
+struct Pass {
+    messages: usize,
+    last_step: Option<i64>,
+    stopped: Option<String>,
+}
+
+/// Decode the complete messages of `input` (its `frames`) one by one and
+/// append each to `enc`, at most `limit` of them, calling `done(k)` after
+/// the `k`-th. A message that does not decode (an error, or a panic of
+/// the decoder, caught) ends the pass, named with its byte range.
+fn transcode<W: std::io::Write>(
+    input: &Path,
+    frames: &Frames,
+    enc: &mut Encoder<W>,
+    limit: Option<usize>,
+    done: &mut dyn FnMut(usize),
+) -> Result<Pass, RepairError> {
+    let file = std::fs::File::open(input).map_err(|e| RepairError::Read {
+        path: input.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    // The decoder sees the complete frames only: a cut message at the end
+    // is not an error, it is what a repair drops.
+    let mut decoder = DecoderApp::decode_lazy(BufReader::new(file.take(frames.end)));
+    let step: rerun::TimelineName = "step".into();
+    let mut pass = Pass {
+        messages: 0,
+        last_step: None,
+        stopped: None,
+    };
+    let damaged = |k: usize, why: String| match frames.spans.get(k) {
+        Some((a, b)) => format!("message {} (bytes {a}..{b}) does not decode: {why}", k + 1),
+        None => format!("message {} does not decode: {why}", k + 1),
+    };
+    while limit.is_none_or(|l| pass.messages < l) {
+        let k = pass.messages;
+        let msg = match guarded(|| decoder.next()) {
+            Ok(None) => break,
+            Ok(Some(Ok(m))) => m,
+            Ok(Some(Err(e))) => {
+                pass.stopped = Some(damaged(k, e.to_string()));
+                break;
+            }
+            Err(panic) => {
+                pass.stopped = Some(damaged(k, panic));
+                break;
+            }
+        };
+        if let LogMsg::ArrowMsg(store, arrow) = &msg {
+            if store.is_recording() {
+                let top = guarded(|| {
+                    Chunk::from_arrow_msg(arrow).map(|c| {
+                        c.timelines()
+                            .get(&step)
+                            .and_then(|t| t.times_raw().iter().max().copied())
+                    })
+                });
+                match top {
+                    Ok(Ok(top)) => pass.last_step = pass.last_step.max(top),
+                    Ok(Err(_)) => {}
+                    Err(panic) => {
+                        pass.stopped = Some(damaged(k, panic));
+                        break;
+                    }
+                }
+            }
+        }
+        match guarded(|| enc.append(&msg)) {
+            Ok(r) => r.map_err(|e| RepairError::Write {
+                path: input.to_path_buf(),
+                message: e.to_string(),
+            })?,
+            Err(panic) => {
+                pass.stopped = Some(damaged(k, panic));
+                break;
+            }
+        };
+        pass.messages += 1;
+        done(pass.messages);
+    }
+    Ok(pass)
+}
+
+/// Decode every complete message of `input` as a repair would, writing
+/// nothing, and report `ok K` on `out` after each: run in a process of
+/// its own by `mpmlab repair`, so that a message on which the decoder
+/// aborts the process (arrow asks for an allocation of petabytes on some
+/// damaged lengths, which no guard can catch) is known by the last line.
+pub fn probe(input: &Path, out: &mut dyn std::io::Write) -> Result<(), RepairError> {
+    let frames = scan(input)?;
+    let mut enc =
+        Encoder::new_eager(frames.version, frames.options, std::io::sink()).map_err(|e| RepairError::Write {
+            path: input.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    transcode(input, &frames, &mut enc, None, &mut |k| {
+        let _ = writeln!(out, "ok {k}");
+        let _ = out.flush();
+    })?;
+    Ok(())
+}
+
+/// The byte range of message `k` (1-based) of `input`, for a report.
+pub fn message_bytes(input: &Path, k: usize) -> Option<(u64, u64)> {
+    scan(input).ok()?.spans.get(k.checked_sub(1)?).copied()
+}
+
 /// Repair `input` into `output`, written whole to `output`'s
 /// `.partial` (locked: a second writer of `output` is refused; a stale
 /// one is replaced only when `force`) and renamed into place. `output`
 /// must not be `input`. A damaged message ends the repair there (its
-/// byte range reported), whatever the decoder does with it.
-pub fn repair(input: &Path, output: &Path, force: bool) -> Result<Repaired, RepairError> {
+/// byte range reported), whatever the decoder does with it; `limit`
+/// (with its reason) stops it before a message known to abort the
+/// decoder ([`probe`]).
+pub fn repair(
+    input: &Path,
+    output: &Path,
+    force: bool,
+    limit: Option<(usize, String)>,
+) -> Result<Repaired, RepairError> {
     let frames = scan(input)?;
-    let read_err = |e: String| RepairError::Read {
-        path: input.to_path_buf(),
-        message: e,
-    };
-    let file = std::fs::File::open(input).map_err(|e| read_err(e.to_string()))?;
-    let size = file.metadata().map_or(frames.end, |m| m.len());
-    // The decoder sees the complete frames only: a cut message at the end
-    // is not an error, it is what a repair drops.
-    let mut decoder = DecoderApp::decode_lazy(BufReader::new(file.take(frames.end)));
-
+    let size = std::fs::metadata(input).map_or(frames.end, |m| m.len());
     let write_err = |e: String| RepairError::Write {
         path: output.to_path_buf(),
         message: e,
@@ -198,53 +312,13 @@ pub fn repair(input: &Path, output: &Path, force: bool) -> Result<Repaired, Repa
     let written = out.and_then(|out| {
         let mut enc = Encoder::new_eager(frames.version, frames.options, BufWriter::new(out))
             .map_err(|e| write_err(e.to_string()))?;
-        let step: rerun::TimelineName = "step".into();
-        let (mut messages, mut last_step, mut stopped) = (0usize, None::<i64>, None);
-        loop {
-            let damaged = |why: String| match frames.spans.get(messages) {
-                Some((a, b)) => format!("message {} (bytes {a}..{b}) does not decode: {why}", messages + 1),
-                None => format!("message {} does not decode: {why}", messages + 1),
-            };
-            let msg = match guarded(|| decoder.next()) {
-                Ok(None) => break,
-                Ok(Some(Ok(m))) => m,
-                Ok(Some(Err(e))) => {
-                    stopped = Some(damaged(e.to_string()));
-                    break;
-                }
-                Err(panic) => {
-                    stopped = Some(damaged(panic));
-                    break;
-                }
-            };
-            if let LogMsg::ArrowMsg(store, arrow) = &msg {
-                if store.is_recording() {
-                    match guarded(|| {
-                        Chunk::from_arrow_msg(arrow).map(|c| {
-                            c.timelines()
-                                .get(&step)
-                                .and_then(|t| t.times_raw().iter().max().copied())
-                        })
-                    }) {
-                        Ok(Ok(top)) => last_step = last_step.max(top),
-                        Ok(Err(_)) => {}
-                        Err(panic) => {
-                            stopped = Some(damaged(panic));
-                            break;
-                        }
-                    }
-                }
+        let mut pass = transcode(input, &frames, &mut enc, limit.as_ref().map(|l| l.0), &mut |_| {})?;
+        if let Some((l, why)) = &limit {
+            if pass.messages == *l && pass.stopped.is_none() {
+                pass.stopped = Some(why.clone());
             }
-            match guarded(|| enc.append(&msg)) {
-                Ok(r) => r.map_err(|e| write_err(e.to_string()))?,
-                Err(panic) => {
-                    stopped = Some(damaged(panic));
-                    break;
-                }
-            };
-            messages += 1;
         }
-        if messages == 0 {
+        if pass.messages == 0 {
             return Err(RepairError::Empty {
                 path: input.to_path_buf(),
             });
@@ -253,9 +327,13 @@ pub fn repair(input: &Path, output: &Path, force: bool) -> Result<Repaired, Repa
         let w = enc.into_inner().map_err(|e| write_err(e.to_string()))?;
         let f = w.into_inner().map_err(|e| write_err(e.error().to_string()))?;
         f.sync_all().map_err(|e| write_err(e.to_string()))?;
-        Ok((messages, last_step, stopped))
+        Ok(pass)
     });
-    let (messages, last_step, stopped) = match written {
+    let Pass {
+        messages,
+        last_step,
+        stopped,
+    } = match written {
         Ok(w) => w,
         Err(e) => {
             staged.discard();
