@@ -72,7 +72,7 @@ fn decodable(input: &Path) -> Result<Option<(usize, String)>, String> {
     let k = text
         .lines()
         .filter_map(|l| l.strip_prefix("ok ").and_then(|n| n.trim().parse::<usize>().ok()))
-        .last()
+        .next_back()
         .unwrap_or(0);
     let bytes = mpmlab::record::repair::message_bytes(input, k + 1)
         .map_or(String::new(), |(a, b)| format!(" (bytes {a}..{b})"));
