@@ -284,6 +284,55 @@ pub fn message_bytes(input: &Path, k: usize) -> Option<(u64, u64)> {
     scan(input).ok()?.spans.get(k.checked_sub(1)?).copied()
 }
 
+/// Whether the first `limit` messages (all: `None`) make a recording
+/// whose footer can be written: a damaged name can leave one chunk at odds
+/// with the others of its entity, which only the footer's index finds.
+/// `Err` with the reason when not.
+fn closes(input: &Path, frames: &Frames, limit: Option<usize>) -> Result<usize, String> {
+    let mut enc = Encoder::new_eager(frames.version, frames.options, std::io::sink()).map_err(|e| e.to_string())?;
+    let pass = transcode(input, frames, &mut enc, limit, &mut |_| {}).map_err(|e| e.to_string())?;
+    match guarded(|| enc.finish()) {
+        Ok(Ok(())) => Ok(pass.messages),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(panic) => Err(panic),
+    }
+}
+
+/// The most messages (at most `limit`) whose recording closes, and why
+/// more do not when they do not ([`closes`]): the first try takes them
+/// all, a bisection finds the longest prefix that closes otherwise.
+fn closing_limit(input: &Path, frames: &Frames, limit: Option<(usize, String)>) -> Option<(usize, String)> {
+    let first = closes(input, frames, limit.as_ref().map(|l| l.0));
+    let (Err(why), n) = (first.clone(), limit.as_ref().map_or(usize::MAX, |l| l.0)) else {
+        return limit;
+    };
+    // How many the pass took before it stopped: an upper bound.
+    let mut enc = Encoder::new_eager(frames.version, frames.options, std::io::sink()).ok()?;
+    let took = transcode(input, frames, &mut enc, Some(n), &mut |_| {}).ok()?.messages;
+    drop(enc);
+    let (mut lo, mut hi) = (0usize, took);
+    // Invariant: `lo` messages close (none trivially), `hi` do not.
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if closes(input, frames, Some(mid)).is_ok() {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let bytes = frames
+        .spans
+        .get(lo)
+        .map_or(String::new(), |(a, b)| format!(" (bytes {a}..{b})"));
+    Some((
+        lo,
+        format!(
+            "message {}{bytes} does not decode: it leaves the recording's index inconsistent: {why}",
+            lo + 1
+        ),
+    ))
+}
+
 /// Repair `input` into `output`, written whole to `output`'s
 /// `.partial` (locked: a second writer of `output` is refused; a stale
 /// one is replaced only when `force`) and renamed into place. `output`
@@ -299,6 +348,7 @@ pub fn repair(
 ) -> Result<Repaired, RepairError> {
     let frames = scan(input)?;
     let size = std::fs::metadata(input).map_or(frames.end, |m| m.len());
+    let limit = closing_limit(input, &frames, limit);
     let write_err = |e: String| RepairError::Write {
         path: output.to_path_buf(),
         message: e,

@@ -1293,3 +1293,24 @@ fn a_message_that_aborts_the_decoder_ends_the_repair_there() {
     assert!(!mpmlab::output::partial_of(&out).exists());
     let _ = std::fs::remove_file(&out);
 }
+
+/// A recording whose 73rd message decodes but carries a damaged column
+/// name, at odds with the other chunks of its entity: rerun's encoder
+/// refuses the footer's index of such a set (the fresh-clone CI run met
+/// one, exit 3 "cannot write"). `repair` finds the longest run of
+/// messages that closes and names the one after it.
+#[test]
+fn a_message_that_spoils_the_index_ends_the_repair_there() {
+    let input = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/index-inconsistent.rrd");
+    let out = temp_path("rec-index-out", "rrd");
+    let (code, o, e) = common::mpmlab(&["repair", input.to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{e}");
+    assert!(
+        o.contains("kept 72 messages")
+            && o.contains("message 73 (bytes 97046..98543)")
+            && o.contains("index inconsistent"),
+        "{o}"
+    );
+    assert!(std::fs::read(&out).unwrap().starts_with(b"RRF"));
+    let _ = std::fs::remove_file(&out);
+}
