@@ -356,13 +356,17 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
             });
         }
         // The previous tangent and its factor are read only after the last
-        // iteration: free them before the next are built, so that two
-        // factors are never held at once.
-        drop(last.take());
+        // iteration: the tangent is freed before the next is built, and
+        // the factor's values become the next factor's (two factors are
+        // never held at once).
+        let spare = last
+            .take()
+            .map(|(_, f): (Vec<f64>, Factorisation)| f.into_values())
+            .unwrap_or_default();
         let t = Instant::now();
         let k = setup.tangent(&res, &d, true)?;
         timings.assembly += t.elapsed().as_secs_f64();
-        let (factor, dd) = factorise_and_solve(setup, &k, &mut symbolic, &res.r, iterations, timings)?;
+        let (factor, dd) = factorise_and_solve(setup, &k, &mut symbolic, &res.r, iterations, timings, spare)?;
         // The full correction; its residual opens the next iteration.
         let t = Instant::now();
         res = correct(setup, &mut d, &dd, rel, &relative)?;
@@ -381,6 +385,7 @@ fn factorise_and_solve(
     r: &[f64],
     iterations: usize,
     timings: &mut Timings,
+    spare: Vec<f64>,
 ) -> Result<(Factorisation, Vec<f64>), StepFailure> {
     let (sim, step) = (setup.frame.sim, setup.frame.step);
     let t = Instant::now();
@@ -394,7 +399,8 @@ fn factorise_and_solve(
             message: "no symbolic analysis".into(),
         });
     };
-    let mut factor = Factorisation::new(analysis, setup.matrix(k), sim.model.max_memory).map_err(singular)?;
+    let mut factor =
+        Factorisation::new_reusing(analysis, setup.matrix(k), sim.model.max_memory, spare).map_err(singular)?;
     timings.factorisation += t.elapsed().as_secs_f64();
     let t = Instant::now();
     let dd = factor.solve(r).map_err(singular)?;

@@ -179,6 +179,15 @@ fn whole_lu(s: &SymbolicCholesky<Ix>, a: SparseRef<'_>, budget: u64) -> Result<F
 }
 
 impl Factorisation {
+    /// The buffer of the factor's values, for the next factor of the same
+    /// analysis ([`Factorisation::new_reusing`]); empty for LU.
+    pub fn into_values(self) -> Vec<f64> {
+        match self.kind {
+            Factor::Cholesky(_, v) | Factor::Ldlt(_, v, _) => v,
+            Factor::Lu(_) => Vec::new(),
+        }
+    }
+
     /// Factorise `a` with the analysis of its pattern: Cholesky, then
     /// `L D L^T` at a non-positive pivot, then LU (of the matrix made whole)
     /// when `L D L^T` meets an exactly zero pivot; LU for general matrices.
@@ -187,6 +196,20 @@ impl Factorisation {
     /// ([`linalg::check_memory`]), and one whose memory cannot be allocated
     /// is an error, not an abort.
     pub fn new(symbolic: &Symbolic, a: SparseRef<'_>, budget: u64) -> Result<Factorisation, FactorError> {
+        Factorisation::new_reusing(symbolic, a, budget, Vec::new())
+    }
+
+    /// [`Factorisation::new`] writing a Cholesky or `L D L^T` factor into
+    /// `spare`, the values of an earlier factor of the same analysis
+    /// ([`Factorisation::into_values`]), when it is large enough: a Newton
+    /// step's iterations after its first reuse one buffer instead of
+    /// having the system zero fresh pages for each.
+    pub fn new_reusing(
+        symbolic: &Symbolic,
+        a: SparseRef<'_>,
+        budget: u64,
+        mut spare: Vec<f64>,
+    ) -> Result<Factorisation, FactorError> {
         let e = symbolic.estimate();
         linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
         let s = match symbolic {
@@ -199,7 +222,14 @@ impl Factorisation {
             }
             Symbolic::Cholesky(s) => s,
         };
-        let mut values = linalg::factor_values(s, || e.what.clone())?;
+        let mut values = if spare.capacity() >= s.len_val() {
+            spare.clear();
+            spare.resize(s.len_val(), 0.0);
+            spare
+        } else {
+            drop(spare);
+            linalg::factor_values(s, || e.what.clone())?
+        };
         let llt = linalg::numeric_llt(s, a, &mut values)?.is_ok();
         if llt && values.iter().all(|v| v.is_finite()) {
             return Ok(Factorisation {
