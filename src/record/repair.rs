@@ -186,11 +186,12 @@ struct Pass {
 /// Decode the complete messages of `input` (its `frames`) one by one and
 /// append each to `enc`, at most `limit` of them, calling `done(k)` after
 /// the `k`-th. A message that does not decode (an error, or a panic of
-/// the decoder, caught) ends the pass, named with its byte range.
+/// the decoder, caught) ends the pass, named with its byte range; a write
+/// error is one of `output` (what `enc` writes, for the report).
 fn transcode<W: std::io::Write>(
     input: &Path,
     frames: &Frames,
-    enc: &mut Encoder<W>,
+    (enc, output): (&mut Encoder<W>, &Path),
     limit: Option<usize>,
     done: &mut dyn FnMut(usize),
 ) -> Result<Pass, RepairError> {
@@ -246,7 +247,7 @@ fn transcode<W: std::io::Write>(
         }
         match guarded(|| enc.append(&msg)) {
             Ok(r) => r.map_err(|e| RepairError::Write {
-                path: input.to_path_buf(),
+                path: output.to_path_buf(),
                 message: e.to_string(),
             })?,
             Err(panic) => {
@@ -272,7 +273,7 @@ pub fn probe(input: &Path, out: &mut dyn std::io::Write) -> Result<(), RepairErr
             path: input.to_path_buf(),
             message: e.to_string(),
         })?;
-    transcode(input, &frames, &mut enc, None, &mut |k| {
+    transcode(input, &frames, (&mut enc, Path::new("nowhere")), None, &mut |k| {
         let _ = writeln!(out, "ok {k}");
         let _ = out.flush();
     })?;
@@ -290,7 +291,8 @@ pub fn message_bytes(input: &Path, k: usize) -> Option<(u64, u64)> {
 /// `Err` with the reason when not.
 fn closes(input: &Path, frames: &Frames, limit: Option<usize>) -> Result<usize, String> {
     let mut enc = Encoder::new_eager(frames.version, frames.options, std::io::sink()).map_err(|e| e.to_string())?;
-    let pass = transcode(input, frames, &mut enc, limit, &mut |_| {}).map_err(|e| e.to_string())?;
+    let pass =
+        transcode(input, frames, (&mut enc, Path::new("nowhere")), limit, &mut |_| {}).map_err(|e| e.to_string())?;
     match guarded(|| enc.finish()) {
         Ok(Ok(())) => Ok(pass.messages),
         Ok(Err(e)) => Err(e.to_string()),
@@ -308,7 +310,9 @@ fn closing_limit(input: &Path, frames: &Frames, limit: Option<(usize, String)>) 
     };
     // How many the pass took before it stopped: an upper bound.
     let mut enc = Encoder::new_eager(frames.version, frames.options, std::io::sink()).ok()?;
-    let took = transcode(input, frames, &mut enc, Some(n), &mut |_| {}).ok()?.messages;
+    let took = transcode(input, frames, (&mut enc, Path::new("nowhere")), Some(n), &mut |_| {})
+        .ok()?
+        .messages;
     drop(enc);
     let (mut lo, mut hi) = (0usize, took);
     // Invariant: `lo` messages close (none trivially), `hi` do not.
@@ -362,7 +366,13 @@ pub fn repair(
     let written = out.and_then(|out| {
         let mut enc = Encoder::new_eager(frames.version, frames.options, BufWriter::new(out))
             .map_err(|e| write_err(e.to_string()))?;
-        let mut pass = transcode(input, &frames, &mut enc, limit.as_ref().map(|l| l.0), &mut |_| {})?;
+        let mut pass = transcode(
+            input,
+            &frames,
+            (&mut enc, output),
+            limit.as_ref().map(|l| l.0),
+            &mut |_| {},
+        )?;
         if let Some((l, why)) = &limit {
             if pass.messages == *l && pass.stopped.is_none() {
                 pass.stopped = Some(why.clone());
