@@ -74,6 +74,56 @@ pub fn safe_stem(name: &str) -> String {
     }
 }
 
+/// The entries of folder `dir` whose names are not among `ours`, sorted
+/// (none when it cannot be read); and whether it holds anything at all.
+pub fn foreign_entries(dir: &Path, ours: &[&str]) -> (Vec<String>, bool) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return (Vec::new(), false);
+    };
+    let names: Vec<String> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    let any = !names.is_empty();
+    let mut foreign: Vec<String> = names.into_iter().filter(|n| !ours.contains(&n.as_str())).collect();
+    foreign.sort();
+    (foreign, any)
+}
+
+/// The first three of `names`, for a message.
+pub fn some_of(names: &[String]) -> String {
+    let more = names.len().saturating_sub(3);
+    let head = names[..names.len().min(3)].join(", ");
+    if more > 0 {
+        format!("{head} and {more} more")
+    } else {
+        head
+    }
+}
+
+/// `path` opened (created if missing, never truncated) and locked
+/// exclusively: `Ok(None)` while another process holds it.
+pub fn lock_file(path: &Path) -> Result<Option<File>, String> {
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .map_err(|e| {
+            format!(
+                "cannot create {}: {}",
+                path.display(),
+                mpmlab_engine::scene::io_reason(&e)
+            )
+        })?;
+    match file.try_lock() {
+        Ok(()) => Ok(Some(file)),
+        Err(TryLockError::WouldBlock) => Ok(None),
+        Err(TryLockError::Error(e)) => Err(format!("cannot lock {}: {e}", path.display())),
+    }
+}
+
 /// `NAME.partial` of `path`.
 pub fn partial_of(path: &Path) -> PathBuf {
     let mut s = path.as_os_str().to_owned();
@@ -134,32 +184,13 @@ impl Staged {
         if let Some(why) = not_replaceable(&partial) {
             return Err(why);
         }
-        let lock = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&partial)
-            .map_err(|e| {
-                format!(
-                    "cannot create {}: {}",
-                    partial.display(),
-                    mpmlab_engine::scene::io_reason(&e)
-                )
-            })?;
-        match lock.try_lock() {
-            Ok(()) => {}
-            Err(TryLockError::WouldBlock) => {
-                return Err(format!(
-                    "another run is writing {} (its {} is locked); wait for it or choose another path",
-                    target.display(),
-                    partial.display()
-                ))
-            }
-            Err(TryLockError::Error(e)) => {
-                return Err(format!("cannot lock {}: {e}", partial.display()));
-            }
-        }
+        let Some(lock) = lock_file(&partial)? else {
+            return Err(format!(
+                "another run is writing {} (its {} is locked); wait for it or choose another path",
+                target.display(),
+                partial.display()
+            ));
+        };
         let stale = lock.metadata().map_or(0, |m| m.len());
         if stale > 0 && !force {
             return Err(format!(

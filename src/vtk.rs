@@ -211,35 +211,19 @@ impl VtkExport {
         }
         std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
         // Another series' files are replaced; anything else is the user's.
-        let mut foreign: Vec<String> = std::fs::read_dir(dir)
-            .map_err(|e| err(e.to_string()))?
-            .filter_map(|e| e.ok())
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .filter(|n| !SERIES_ENTRIES.contains(&n.as_str()))
-            .collect();
+        let (foreign, _) = crate::output::foreign_entries(dir, SERIES_ENTRIES);
         if !foreign.is_empty() && !force {
-            foreign.sort();
             return Err(err(format!(
                 "the folder holds files that are not a ParaView series of this program ({}); \
                  choose another folder, or --force to write beside them",
-                foreign.iter().take(3).cloned().collect::<Vec<_>>().join(", ")
+                crate::output::some_of(&foreign)
             )));
         }
-        let lock = std::fs::OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(dir.join(LOCK))
-            .map_err(|e| err(e.to_string()))?;
-        match lock.try_lock() {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                return Err(err(
-                    "another run is writing a series to it; wait for it or choose another folder".into(),
-                ))
-            }
-            Err(std::fs::TryLockError::Error(e)) => return Err(err(format!("cannot lock it: {e}"))),
-        }
+        let Some(lock) = crate::output::lock_file(&dir.join(LOCK)).map_err(err)? else {
+            return Err(err(
+                "another run is writing a series to it; wait for it or choose another folder".into(),
+            ));
+        };
         let series = |name, ext| Series::create(dir, name, ext).map_err(|e| err(e.to_string()));
         let m = sim.model();
         let mut v = VtkExport {

@@ -273,6 +273,23 @@ pub fn factor_values(s: &SymbolicCholesky<Ix>, what: impl FnOnce() -> String) ->
     Ok(values)
 }
 
+/// [`factor_values`] in `spare` (an earlier factor's values) when it
+/// holds enough: zeroed again, without fresh pages from the system.
+pub fn factor_values_in(
+    s: &SymbolicCholesky<Ix>,
+    mut spare: Vec<f64>,
+    what: impl FnOnce() -> String,
+) -> Result<Vec<f64>, FactorError> {
+    if spare.capacity() < s.len_val() {
+        // Freed first: the two are never held at once.
+        drop(spare);
+        return factor_values(s, what);
+    }
+    spare.clear();
+    spare.resize(s.len_val(), 0.0);
+    Ok(spare)
+}
+
 /// A factorisation's workspace, allocated fallibly.
 pub fn workspace(req: faer::dyn_stack::StackReq) -> Result<MemBuffer, FactorError> {
     MemBuffer::try_new(req).map_err(|_| FactorError::allocation("the factorisation's workspace", req.size_bytes()))
@@ -316,18 +333,11 @@ pub fn cholesky_reusing(
     symbolic: &CholeskySymbolic,
     a: SparseRef<'_>,
     budget: u64,
-    mut spare: Vec<f64>,
+    spare: Vec<f64>,
 ) -> Result<Factor, FactorError> {
     let s = symbolic;
     check_memory(|| factor_what("Cholesky", s), cholesky_bytes(s), budget)?;
-    let mut values = if spare.capacity() >= s.len_val() {
-        spare.clear();
-        spare.resize(s.len_val(), 0.0);
-        spare
-    } else {
-        drop(spare);
-        factor_values(s, || factor_what("Cholesky", s))?
-    };
+    let mut values = factor_values_in(s, spare, || factor_what("Cholesky", s))?;
     numeric_llt(s, a, &mut values)?.map_err(|pivot| FactorError::NotPositiveDefinite { pivot })?;
     Ok(Factor {
         symbolic: s.clone(),

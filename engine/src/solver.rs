@@ -208,7 +208,7 @@ impl Factorisation {
         symbolic: &Symbolic,
         a: SparseRef<'_>,
         budget: u64,
-        mut spare: Vec<f64>,
+        spare: Vec<f64>,
     ) -> Result<Factorisation, FactorError> {
         let e = symbolic.estimate();
         linalg::check_memory(|| e.what.clone(), e.bytes, budget)?;
@@ -222,14 +222,7 @@ impl Factorisation {
             }
             Symbolic::Cholesky(s) => s,
         };
-        let mut values = if spare.capacity() >= s.len_val() {
-            spare.clear();
-            spare.resize(s.len_val(), 0.0);
-            spare
-        } else {
-            drop(spare);
-            linalg::factor_values(s, || e.what.clone())?
-        };
+        let mut values = linalg::factor_values_in(s, spare, || e.what.clone())?;
         let llt = linalg::numeric_llt(s, a, &mut values)?.is_ok();
         if llt && values.iter().all(|v| v.is_finite()) {
             return Ok(Factorisation {

@@ -115,40 +115,13 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
         return Ok(ExitCode::from(2));
     }
     if let Some(t) = &a.target {
-        let mut tries = Vec::new();
-        for t in &a.tries {
-            match Vary::parse(t) {
-                Ok(v) => tries.push(v),
-                Err(e) => {
-                    eprintln!("error: --try {e}");
-                    return Ok(ExitCode::from(2));
-                }
+        return match parse_tries(&a.tries) {
+            Ok(tries) => target_search(&name, &path, a.out.clone(), t, a.budget, tries, a.force),
+            Err(e) => {
+                eprintln!("error: {e}");
+                Ok(ExitCode::from(2))
             }
-        }
-        // The search sets h and points per cell itself; a setting given
-        // twice would label runs with a value they did not use.
-        let own = [
-            Vary::parse("h=1").map_err(anyhow::Error::msg)?,
-            Vary::parse("ppc=1").map_err(anyhow::Error::msg)?,
-        ];
-        for t in &tries {
-            if own
-                .iter()
-                .any(|o| mpmlab::sweep::overlapping(&[o.clone(), t.clone()]).is_some())
-            {
-                eprintln!(
-                    "error: --try {}: the target search refines h and points per cell itself; \
-                     --try sets the other settings it compares (basis, placement, steps, delta, gamma_k)",
-                    t.key
-                );
-                return Ok(ExitCode::from(2));
-            }
-        }
-        if let Some(e) = mpmlab::sweep::overlapping(&tries) {
-            eprintln!("error: {}", e.replace("--vary", "--try"));
-            return Ok(ExitCode::from(2));
-        }
-        return target_search(&name, &path, a.out.clone(), t, a.budget, tries, a.force);
+        };
     }
     for v in &a.vary {
         varies.push(Vary::parse(v).map_err(anyhow::Error::msg)?);
@@ -221,28 +194,65 @@ pub fn sweep(a: SweepArgs) -> Result<ExitCode> {
     });
     out!("{}", driver::finish(&folder, &name).map_err(anyhow::Error::msg)?);
     if a.estimate {
-        // The estimate needs three completed cell sizes; failed runs can
-        // leave fewer, which is said, not passed over.
-        let done = folder.collect();
-        let mut sizes: Vec<&str> = runs
-            .iter()
-            .filter(|r| done.get(&r.id).is_some_and(|d| d.completed))
-            .filter_map(|r| r.settings.iter().find(|(k, _)| k == "h" || k == "grid.h"))
-            .map(|(_, v)| v.as_str())
-            .collect();
-        sizes.sort_unstable();
-        sizes.dedup();
-        if sizes.len() < 3 {
-            eprintln!(
-                "error: --estimate: runs at only {} cell size{} completed ({}); an estimate needs three (the failed runs are in the table)",
-                sizes.len(),
-                if sizes.len() == 1 { "" } else { "s" },
-                if sizes.is_empty() { "none".to_string() } else { format!("h = {}", sizes.join(", ")) }
-            );
+        if let Err(e) = sizes_completed(&folder, &runs) {
+            eprintln!("error: --estimate: {e}");
             return Ok(ExitCode::from(1));
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The `--try` settings of a target search: parsed, none of the settings
+/// the search sets itself (h and points per cell), none given twice (a
+/// setting given twice would label runs with a value they did not use).
+fn parse_tries(given: &[String]) -> Result<Vec<mpmlab::sweep::Vary>, String> {
+    use mpmlab::sweep::{overlapping, Vary};
+    let tries = given
+        .iter()
+        .map(|t| Vary::parse(t).map_err(|e| format!("--try {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let own = [Vary::parse("h=1")?, Vary::parse("ppc=1")?];
+    if let Some(t) = tries
+        .iter()
+        .find(|t| own.iter().any(|o| overlapping(&[o.clone(), (*t).clone()]).is_some()))
+    {
+        return Err(format!(
+            "--try {}: the target search refines h and points per cell itself; \
+             --try sets the other settings it compares (basis, placement, steps, delta, gamma_k)",
+            t.key
+        ));
+    }
+    match overlapping(&tries) {
+        Some(e) => Err(e.replace("--vary", "--try")),
+        None => Ok(tries),
+    }
+}
+
+/// Whether runs at three cell sizes or more completed (an estimate needs
+/// them; failed runs can leave fewer, which is said, not passed over).
+fn sizes_completed(folder: &mpmlab::sweep::Folder, runs: &[mpmlab::sweep::Run]) -> Result<(), String> {
+    let done = folder.collect();
+    let mut sizes: Vec<&str> = runs
+        .iter()
+        .filter(|r| done.get(&r.id).is_some_and(|d| d.completed))
+        .filter_map(|r| r.settings.iter().find(|(k, _)| k == "h" || k == "grid.h"))
+        .map(|(_, v)| v.as_str())
+        .collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    if sizes.len() >= 3 {
+        return Ok(());
+    }
+    Err(format!(
+        "runs at only {} cell size{} completed ({}); an estimate needs three (the failed runs are in the table)",
+        sizes.len(),
+        if sizes.len() == 1 { "" } else { "s" },
+        if sizes.is_empty() {
+            "none".to_string()
+        } else {
+            format!("h = {}", sizes.join(", "))
+        }
+    ))
 }
 
 /// `mpmlab sweep-run`: one run, its result row to `result`.

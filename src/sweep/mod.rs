@@ -899,38 +899,22 @@ impl Folder {
         if d.exists() && !d.is_dir() {
             return Err(format!("--out {} is not a folder", d.display()));
         }
-        let Ok(entries) = std::fs::read_dir(d) else {
-            return Ok(());
-        };
-        let names: Vec<String> = entries
-            .filter_map(|e| e.ok())
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect();
-        if names.is_empty() || force {
+        let (foreign, any) = crate::output::foreign_entries(d, SWEEP_ENTRIES);
+        if !any || force {
             return Ok(());
         }
         let made = self.runs().is_dir() && self.results().is_dir();
-        let mut foreign: Vec<&String> = names.iter().filter(|n| !SWEEP_ENTRIES.contains(&n.as_str())).collect();
         if foreign.is_empty() && made {
             return Ok(());
         }
-        foreign.sort();
         Err(format!(
-            "--out {} holds files that are not a sweep's{}: a sweep there would replace or mix with them; \
+            "--out {} holds files that are not a sweep's ({}): a sweep there would replace or mix with them; \
              choose another folder, or --force",
             d.display(),
             if foreign.is_empty() {
-                " (no runs/ and results/ of an earlier sweep)".to_string()
+                "no runs/ and results/ of an earlier sweep".to_string()
             } else {
-                format!(
-                    " ({})",
-                    foreign
-                        .iter()
-                        .take(3)
-                        .map(|s| s.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
+                crate::output::some_of(&foreign)
             }
         ))
     }

@@ -28,6 +28,13 @@ enum Contents {
     Bytes(Vec<u8>),
 }
 
+/// A new empty folder for one test's files.
+fn scratch(stem: &str) -> crate::common::TempPath {
+    let dir = temp_path(stem, "d");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 fn shipped(name: &str) -> String {
     std::fs::read_to_string(scene_path(name)).unwrap()
 }
@@ -1535,8 +1542,7 @@ fn broken_scenes_are_refused_with_located_messages() {
     let cases = cases();
     assert!(cases.len() >= 150, "{} cases", cases.len());
     eprintln!("{} broken scenes", cases.len());
-    let dir = temp_path("hostile", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile");
     let results = check_all(&cases, &dir);
     let failures: Vec<String> = cases
         .iter()
@@ -1561,8 +1567,7 @@ fn broken_scenes_are_refused_with_located_messages() {
 
 #[test]
 fn a_lattice_of_nine_million_points_is_refused_by_its_memory_estimate() {
-    let dir = temp_path("hostile-memory", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-memory");
     let p = dir.join("lattice.toml");
     let text = edit(
         "patch-compression",
@@ -1620,8 +1625,7 @@ fn a_lattice_of_nine_million_points_is_refused_by_its_memory_estimate() {
 
 #[test]
 fn files_that_are_not_scenes_are_refused_before_reading() {
-    let dir = temp_path("hostile-files", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-files");
     let run = |p: &Path| mpmlab(&["check", p.to_str().unwrap()]);
 
     // Binary garbage with invalid UTF-8: located at its first bad byte.
@@ -1723,8 +1727,7 @@ fn files_that_are_not_scenes_are_refused_before_reading() {
 
 #[test]
 fn record_does_not_overwrite_what_is_not_a_recording() {
-    let dir = temp_path("hostile-record", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-record");
     let scene = dir.join("s.toml");
     let text = shipped("patch-compression");
     std::fs::write(&scene, &text).unwrap();
@@ -1788,8 +1791,7 @@ fn record_does_not_overwrite_what_is_not_a_recording() {
 
 #[test]
 fn outputs_never_replace_the_scene_and_clash_by_identity() {
-    let dir = temp_path("hostile-identity", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-identity");
     let scene = dir.join("s.toml");
     let text = shipped("patch-compression");
     std::fs::write(&scene, &text).unwrap();
@@ -1824,8 +1826,7 @@ fn outputs_never_replace_the_scene_and_clash_by_identity() {
 
 #[test]
 fn a_run_that_cannot_start_leaves_the_old_outputs_as_they_were() {
-    let dir = temp_path("hostile-keep", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-keep");
     let scene = dir.join("s.toml");
     std::fs::write(&scene, shipped("patch-compression")).unwrap();
     let s = scene.to_str().unwrap();
@@ -1876,8 +1877,7 @@ fn a_run_that_cannot_start_leaves_the_old_outputs_as_they_were() {
 
 #[test]
 fn a_second_run_writing_the_same_recording_is_refused() {
-    let dir = temp_path("hostile-two-writers", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-two-writers");
     let rrd = dir.join("run.rrd");
     let bin = env!("CARGO_BIN_EXE_mpmlab");
     // The first run is long enough to be running when the second starts:
@@ -1918,8 +1918,7 @@ fn a_second_run_writing_the_same_recording_is_refused() {
 
 #[test]
 fn a_checkpoint_folder_with_other_files_is_refused_unless_forced() {
-    let dir = temp_path("hostile-ckpt-folder", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-ckpt-folder");
     std::fs::write(dir.join("notes.txt"), b"mine").unwrap();
     let ck = dir.to_str().unwrap();
     let (code, _, err) = mpmlab(&["run", "scenarios/patch-compression.toml", "--quiet", "--checkpoint", ck]);
@@ -1978,8 +1977,7 @@ fn with_file_limit(dir: &Path, blocks: u64, args: &[&str]) -> (i32, String) {
 
 #[test]
 fn a_full_disk_ends_the_run_with_what_was_written_readable() {
-    let dir = temp_path("hostile-full-disk", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-full-disk");
     let d = dir.to_str().unwrap();
     let scene = std::path::absolute(scene_path("ghost-collision-plastic")).unwrap();
     let scene = scene.to_str().unwrap();
@@ -2057,8 +2055,7 @@ fn a_full_disk_ends_the_run_with_what_was_written_readable() {
 
 #[test]
 fn sweep_and_series_folders_with_other_files_are_refused_unless_forced() {
-    let dir = temp_path("hostile-foreign-folders", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-foreign-folders");
     std::fs::write(dir.join("sweep.csv"), b"my own table").unwrap();
     let d = dir.to_str().unwrap();
     // A user's sweep.csv in the --out folder was silently replaced.
@@ -2111,8 +2108,7 @@ fn sweep_and_series_folders_with_other_files_are_refused_unless_forced() {
 
 #[test]
 fn a_run_with_no_step_left_writes_its_table_and_damaged_results_are_named() {
-    let dir = temp_path("hostile-no-step", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-no-step");
     let d = dir.to_str().unwrap();
     let (code, _, err) = mpmlab(&[
         "run",
@@ -2373,8 +2369,7 @@ fn memory_that_cannot_be_allocated_for_a_step_is_a_reported_failure() {
     // workspace) are reserved fallibly, so the step fails with exit 1 and
     // `out of memory` instead of aborting. (The points are reserved
     // fallibly while the model is built: next test.)
-    let dir = temp_path("hostile-ulimit", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-ulimit");
     let p = dir.join("column.toml");
     let text = edit(
         "column-small-strain",
@@ -2443,8 +2438,7 @@ fn points_that_cannot_be_allocated_name_their_field() {
     // memory budget lifted, under `ulimit -v` 1.5 GB: the points are
     // reserved fallibly before they are placed, so the scene is refused
     // with exit 2 naming `body[0].lattice` and the bytes, not an abort.
-    let dir = temp_path("hostile-ulimit-points", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-ulimit-points");
     let p = dir.join("lattice.toml");
     std::fs::write(
         &p,
@@ -2536,8 +2530,7 @@ fn an_lu_factor_that_cannot_be_allocated_is_a_step_failure() {
     // (194 MB estimated before pivoting) does not: the step fails as out of
     // memory naming the factor, exit 1, not an abort (134) nor a
     // "singular system".
-    let dir = temp_path("hostile-ulimit-lu", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-ulimit-lu");
     let p = dir.join("fbar.toml");
     std::fs::write(&p, fbar_block("0.01")).unwrap();
     let o = std::process::Command::new("sh")
@@ -2569,8 +2562,7 @@ fn no_memory_limit_makes_a_run_abort_or_hang() {
     // exit 0, 1 (a step failure, reported) or 2 (refused), within 60 s:
     // before the fallible residual buffers, dense eigenvalues and the
     // kernels' warm-up, three of these ended in SIGABRT (134) and one hung.
-    let dir = temp_path("hostile-ulimit-sweep", "d");
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("hostile-ulimit-sweep");
     let scenes = dir.join("scenes");
     std::fs::create_dir_all(&scenes).unwrap();
     let with_h = |name: &str, h: Option<&str>| {
