@@ -4,8 +4,9 @@ use anyhow::{Context, Result};
 use std::path::Path;
 use std::process::ExitCode;
 
-/// `mpmlab replay FILE`: the rerun viewer on a recording, if installed;
-/// otherwise the exact command that installs the matching viewer (exit 1).
+/// `mpmlab replay FILE`: a new rerun viewer of its own on a recording, if
+/// installed; otherwise the exact command that installs the matching
+/// viewer (exit 1).
 pub fn replay(file: &Path) -> Result<ExitCode> {
     use mpmlab::record::RERUN_VERSION;
     if !file.is_file() {
@@ -33,7 +34,12 @@ pub fn replay(file: &Path) -> Result<ExitCode> {
         );
         return Ok(ExitCode::from(1));
     };
+    // `--new` (rerun's `--port auto`): a viewer of its own, on a free port
+    // if the default one is taken. Without it, rerun hands the file to
+    // whatever already listens on the default port (another user's
+    // viewer, or a process that is no viewer at all).
     let status = std::process::Command::new(&viewer)
+        .arg("--new")
         .arg(file)
         .status()
         .with_context(|| format!("cannot start {}", viewer.display()))?;

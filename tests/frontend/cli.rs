@@ -160,7 +160,10 @@ fn replay_opens_the_viewer_or_says_how_to_install_it() {
         out.contains("pip install rerun-sdk==0.36.3") && out.contains(rrd.to_str().unwrap()),
         "{out}"
     );
-    // A viewer on PATH is started with the file.
+    // A viewer on PATH is started with the file, as a new viewer of its
+    // own (`--new`), even while something listens on rerun's default port
+    // (9876): rerun would otherwise hand the file to that process.
+    let _busy = std::net::TcpListener::bind("127.0.0.1:9876");
     let fake = empty.join("rerun");
     let log = empty.join("args");
     std::fs::write(&fake, format!("#!/bin/sh\necho \"$@\" > '{}'\n", log.display())).unwrap();
@@ -168,7 +171,10 @@ fn replay_opens_the_viewer_or_says_how_to_install_it() {
     std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
     let (code, _) = run(&format!("{}:/usr/bin:/bin", empty.display()));
     assert_eq!(code, 0);
-    assert_eq!(std::fs::read_to_string(&log).unwrap().trim(), rrd.to_str().unwrap());
+    assert_eq!(
+        std::fs::read_to_string(&log).unwrap().trim(),
+        format!("--new {}", rrd.to_str().unwrap())
+    );
     let _ = std::fs::remove_dir_all(&empty);
     let _ = std::fs::remove_file(&rrd);
 }
