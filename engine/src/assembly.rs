@@ -9,6 +9,7 @@
 //! argsort), so refilling values for another iteration is a copy.
 
 use crate::basis::{factor_len, key_of, weights_1d, write_factors, BasisKind, StencilKey, StencilView};
+use crate::geometry::P2;
 use crate::grid::Grid;
 use crate::linalg::{FactorError, Ix, SparseRef};
 use crate::model::{Body, GridDirichlet, GridTarget};
@@ -382,11 +383,23 @@ pub(crate) fn reach(
     cells: &mut [bool],
     fill: &mut [f64],
 ) {
+    reach_from(grid, pts, &pts.x, basis, cells, fill)
+}
+
+/// [`reach`] with the points at positions `x`.
+fn reach_from(
+    grid: &Grid,
+    pts: &Points,
+    x: &[P2],
+    basis: impl Fn(usize) -> BasisKind,
+    cells: &mut [bool],
+    fill: &mut [f64],
+) {
     for p in 0..pts.len() {
         if pts.vol[p] == 0.0 {
             continue;
         }
-        reached_cells(grid, basis(pts.body[p]), pts.x[p], pts.lp[p], pts.vol[p], |c, f| {
+        reached_cells(grid, basis(pts.body[p]), x[p], pts.lp[p], pts.vol[p], |c, f| {
             cells[c] = true;
             fill[c] += f;
         });
@@ -397,10 +410,16 @@ pub(crate) fn reach(
 /// without the rest of a mapping: what a simulation shows before its first
 /// step.
 pub(crate) fn active_cells(grid: &Grid, pts: &Points, bodies: &[Body]) -> Vec<usize> {
+    active_cells_at(grid, pts, &pts.x, bodies)
+}
+
+/// [`active_cells`] with the points at positions `x`.
+pub(crate) fn active_cells_at(grid: &Grid, pts: &Points, x: &[P2], bodies: &[Body]) -> Vec<usize> {
     let mut cells = vec![false; grid.num_cells()];
-    reach(
+    reach_from(
         grid,
         pts,
+        x,
         |b| bodies[b].basis,
         &mut cells,
         &mut vec![0.0; grid.num_cells()],

@@ -394,6 +394,8 @@ struct Merged {
     /// whether every sub-step reused the mass pattern.
     max_speed: f64,
     pattern_reused: bool,
+    /// The first sub-step Newton stopped at the round-off floor.
+    attainable: Option<crate::report::Attainable>,
 }
 
 impl Merged {
@@ -413,6 +415,7 @@ impl Merged {
             timings: Timings::default(),
             max_speed: 0.0,
             pattern_reused: false,
+            attainable: None,
         }
     }
 
@@ -424,6 +427,7 @@ impl Merged {
             self.pattern_reused = d.pattern_reused && (self.substeps == 0 || self.pattern_reused);
         }
         self.substeps += 1;
+        self.attainable = self.attainable.or(r.solver.as_ref().and_then(|s| s.attainable));
         if self.first.is_none() {
             self.first = Some(r);
         } else {
@@ -446,6 +450,7 @@ impl Merged {
         if let Some(s) = r.solver.as_mut() {
             s.cutbacks = self.cutbacks;
             s.substeps = self.substeps;
+            s.attainable = self.attainable;
         }
         r
     }

@@ -701,14 +701,19 @@ pub type GradOp = [[[f64; 2]; 2]; 2];
 /// prescribed field moved to the right-hand side).
 pub fn add_fd(st: StencilView, bbar: &[Op], c: &[[f64; 3]; 3], da: &[P2], w: f64, f: &mut [P2]) {
     let g = st.gradient(|n| da[n]);
-    let eps = [g[0][0], g[1][1], g[0][1] + g[1][0]];
+    add_bt_c_eps(st, bbar, c, [g[0][0], g[1][1], g[0][1] + g[1][0]], w, f);
+}
+
+/// Add `w B^T C eps` to the nodal force `f`, for per-node operators `b`
+/// of stencil `st` and a strain `eps`.
+pub fn add_bt_c_eps(st: StencilView, b: &[Op], c: &[[f64; 3]; 3], eps: [f64; 3], w: f64, f: &mut [P2]) {
     if eps == [0.0; 3] {
         return;
     }
     let sig = mul3(c, eps);
     for (k, (n, _, _)) in st.iter().enumerate() {
         for comp in 0..2 {
-            f[n][comp] += w * (0..3).map(|r| bbar[k][r][comp] * sig[r]).sum::<f64>();
+            f[n][comp] += w * (0..3).map(|r| b[k][r][comp] * sig[r]).sum::<f64>();
         }
     }
 }

@@ -11,23 +11,65 @@
 //! 5. update points: `de = B du`, `s += D de`, `x += N du`, `V *= det(I + grad du)`;
 //!    the grid is then forgotten.
 //!
+//! With `fbar` the points of a patch strain with B-bar's operator instead
+//! of `B` ([`crate::implicit::bbar`]); in an implicit boundary's band with
+//! C (18)'s.
+//!
 //! Failures (singular system, residual above tolerance, non-finite values)
 //! are returned as [`StepFailure`] and leave the state at the last good step.
 
 use crate::assembly::{Dof, Mapping};
 use crate::geometry::P2;
 use crate::ibm::{self, IbmReport};
+use crate::implicit::bbar::Bbar;
 use crate::implicit::{band, contributions, finish, norm, Assembly, At, Done, Frame, Interval, Response};
 use crate::linalg::{self, Condition, Eigen, SparseRef};
 use crate::material::mul3;
 use crate::points::Points;
 use crate::report::{SolverReport, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
-use crate::state::{check_points, Forces, Simulation};
+use crate::state::{check_finite, check_points, Forces, Simulation};
 use std::time::Instant;
 
-/// One quasi-static small-strain load step: each phase is a function below.
+/// One quasi-static small-strain load step, on the configuration at the
+/// start of the step (`update_points`, the default) or on the starting
+/// configuration ([`on_the_starting_configuration`]).
 pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
+    if sim.model.analysis.update_points {
+        incremental_step(sim)
+    } else {
+        on_the_starting_configuration(sim)
+    }
+}
+
+/// `update_points = false`: the step is solved with the points at their
+/// starting positions, volumes and domains (a linear analysis of one
+/// configuration: the load steps then split a linear solution, and the
+/// grid needs no room for the motion); the points then move on by the
+/// step's displacement, so that displacements accumulate and drawings
+/// show the deformed body (where the grid need not reach). On a failure
+/// the state is as it was.
+fn on_the_starting_configuration(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
+    let pts = &mut sim.state.points;
+    let moved = std::mem::replace(&mut pts.x, pts.x0.clone());
+    let (vol, lp) = (pts.vol.clone(), pts.lp.clone());
+    let result = incremental_step(sim);
+    let pts = &mut sim.state.points;
+    if result.is_ok() {
+        for (p, x) in pts.x.iter_mut().enumerate() {
+            let x0 = pts.x0[p];
+            *x = [moved[p][0] + (x[0] - x0[0]), moved[p][1] + (x[1] - x0[1])];
+        }
+        (pts.vol, pts.lp) = (vol, lp);
+    } else {
+        pts.x = moved;
+    }
+    result
+}
+
+/// One quasi-static small-strain load step on the points as they are:
+/// each phase is a function below.
+fn incremental_step(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
     let step = sim.state.step + 1;
     let lambda0 = sim.state.step as f64 / sim.load_steps() as f64;
     let lambda1 = step as f64 / sim.load_steps() as f64;
@@ -103,6 +145,7 @@ fn done(
             negative_pivots: Some(0),
             cutbacks: Vec::new(),
             substeps: 1,
+            attainable: None,
         },
     }
 }
@@ -181,18 +224,22 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
     let (sim, map, pts) = (frame.sim, &frame.map, &frame.sim.state.points);
     let (k, coupling) = setup.stiffness(true)?;
     let (mut forces, boundaries) = sim.nodal_forces(map, frame.step, frame.lambda1)?;
-    if let Some(s) = &frame.ibm {
-        // Points inside a band work through B_bar: correct f_int.
-        for p in (0..pts.len()).filter(|&p| s.in_band[p] && pts.vol[p] > 0.0) {
-            let st = map.stencils.get(p);
-            let (bb, plain) = s.point_b(st, pts.x[p]);
-            for (k, (n, _, _)) in st.iter().enumerate() {
-                for c in 0..2 {
-                    if let Dof::Free(i) = map.dofs.node_dof[n][c] {
-                        let sig = pts.stress[p];
-                        forces.int[i] +=
-                            pts.vol[p] * (0..3).map(|r| (bb[k][r][c] - plain[k][r][c]) * sig[r]).sum::<f64>();
-                    }
+    // Points inside a band (C (18)) and in a B-bar patch work through
+    // their own operator, not B: correct f_int by (op - B)^T s V.
+    for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
+        let st = map.stencils.get(p);
+        let op = match (&frame.bbar, &frame.ibm) {
+            (Some(bb), _) if bb.op(map, p).is_some() => bb.op(map, p),
+            (_, Some(s)) if s.in_band[p] => Some(s.point_b(st, pts.x[p]).0),
+            _ => None,
+        };
+        let Some(op) = op else { continue };
+        let plain = ibm::plain_b(st);
+        let sig = pts.stress[p];
+        for (k, (n, _, _)) in st.iter().enumerate() {
+            for c in 0..2 {
+                if let Dof::Free(i) = map.dofs.node_dof[n][c] {
+                    forces.int[i] += pts.vol[p] * (0..3).map(|r| (op[k][r][c] - plain[k][r][c]) * sig[r]).sum::<f64>();
                 }
             }
         }
@@ -336,13 +383,19 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
     let nodal_d = nodal_increments(map, du);
     // Points move with N (d + d^a); those inside a band with D N d + N d^a.
     let nodal = frame.motion(&nodal_d);
-    let (mut points, fint_fixed_new) = updated_points(sim, map, &nodal, step)?;
+    let (mut points, fint_fixed_new) = updated_points(sim, map, frame.bbar.as_ref(), &nodal, step)?;
     // In a band, points move with D N d + N d^a and strain with B_bar.
     let (ibm_reports, ibm_work) = match &frame.ibm {
         Some(s) => band::small_strain_update(frame, s, &mut points, &nodal_d, &forces.ext),
         None => (Vec::new(), 0.0),
     };
-    check_points(&sim.model.grid, &points, step, residuals)?;
+    // On one configuration (`update_points = false`) the moved points are
+    // only drawn: they need to be finite, not on the grid.
+    if sim.model.analysis.update_points {
+        check_points(&sim.model.grid, &points, step, residuals)?;
+    } else {
+        check_finite(&points, step, residuals)?;
+    }
     // Work: free dofs carry f_ext, prescribed dofs the support force f_int.
     let mut work = 0.0;
     for i in 0..map.dofs.n_free {
@@ -391,6 +444,7 @@ fn update(setup: &Setup, system: &System, du: &[f64], residuals: &[f64]) -> Resu
 fn updated_points(
     sim: &Simulation,
     map: &Mapping,
+    bbar: Option<&Bbar>,
     nodal: &[P2],
     step: usize,
 ) -> Result<(Points, Vec<f64>), StepFailure> {
@@ -403,7 +457,12 @@ fn updated_points(
         let st = map.stencils.get(p);
         let du = st.interpolate(|n| nodal[n]);
         let g = st.gradient(|n| nodal[n]);
-        let de = [g[0][0], g[1][1], g[0][1] + g[1][0]];
+        // A B-bar patch's point strains with its operator.
+        let op = bbar.and_then(|b| b.op(map, p));
+        let de = match bbar.and_then(|b| b.strain(map, p, nodal)) {
+            Some(e) => e,
+            None => [g[0][0], g[1][1], g[0][1] + g[1][0]],
+        };
         let d = sim.model.materials[sim.model.bodies[old.body[p]].material].d_matrix();
         let ds = mul3(&d, de);
         let v = pts.vol[p];
@@ -413,8 +472,11 @@ fn updated_points(
         }
         if v > 0.0 {
             let s = pts.stress[p];
-            for (n, _, [dx, dy]) in st.iter() {
-                let fi = [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v];
+            for (k, (n, _, [dx, dy])) in st.iter().enumerate() {
+                let fi = match &op {
+                    Some(b) => [0, 1].map(|c| (0..3).map(|r| b[k][r][c] * s[r]).sum::<f64>() * v),
+                    None => [(dx * s[0] + dy * s[2]) * v, (dy * s[1] + dx * s[2]) * v],
+                };
                 for c in 0..2 {
                     if let Dof::Fixed(i) = map.dofs.node_dof[n][c] {
                         fint_fixed[i] += fi[c];

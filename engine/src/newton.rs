@@ -46,7 +46,7 @@ use crate::implicit::{
 };
 use crate::kinematics::{commit_point, increment_gradient};
 use crate::linalg::{self, Condition, SparseRef};
-use crate::report::{SolverReport, StepFailure, StepReport, Timings};
+use crate::report::{Attainable, SolverReport, StepFailure, StepReport, Timings};
 use crate::scene::ConditionMode;
 use crate::solver::{Factorisation, Symbolic, Symmetry};
 use crate::state::Simulation;
@@ -285,6 +285,7 @@ pub(crate) fn increment(
             negative_pivots: factor.and_then(|f| f.1),
             cutbacks: Vec::new(),
             substeps: 1,
+            attainable: solved.attainable,
         },
     };
     let closed = setup.frame.close();
@@ -308,6 +309,8 @@ struct Solved {
     /// The last tangent and its factorisation (for the condition number,
     /// the factorisation used and the inertia).
     last: Option<(Vec<f64>, Factorisation)>,
+    /// Stopped above the tolerance at the round-off floor.
+    attainable: Option<Attainable>,
 }
 
 /// Newton-Raphson on the step's residual: tangent, factorisation by
@@ -322,6 +325,10 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
     let mut symbolic = None;
     let mut last = None;
     let mut iterations = 0;
+    // The last correction relative to the unknowns, and the last
+    // tangent's condition estimate once a stalled residual asked for it.
+    let mut correction = f64::INFINITY;
+    let mut kappa = None;
     let relative = |res: &Residual| norm(&res.r) / if res.scale > 0.0 { res.scale } else { 1.0 };
     let t = Instant::now();
     let mut res = setup.residual(&d)?;
@@ -346,6 +353,17 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
                 residuals,
                 iterations,
                 last,
+                attainable: None,
+            });
+        }
+        if let Some(a) = at_the_floor(setup, &mut last, &residuals, correction, &mut kappa) {
+            return Ok(Solved {
+                d,
+                res,
+                residuals,
+                iterations,
+                last,
+                attainable: Some(a),
             });
         }
         if iterations >= params.max_iterations {
@@ -371,9 +389,47 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
         let t = Instant::now();
         res = correct(setup, &mut d, &dd, rel, &relative)?;
         timings.assembly += t.elapsed().as_secs_f64();
+        let size = d.iter().map(|v| v[0] * v[0] + v[1] * v[1]).sum::<f64>().sqrt();
+        correction = norm(&dd) / size.max(f64::MIN_POSITIVE);
         last = Some((k, factor));
         iterations += 1;
     }
+}
+
+/// Whether Newton has converged as far as arithmetic allows
+/// ([`Attainable`]): the relative residual (the last of `residuals`) has
+/// stalled (above half the one before); the last correction changed the
+/// unknowns by at most `sqrt(eps)` of their size (the classic step test
+/// of nonlinear solvers: below it a further step only moves round-off);
+/// and the residual is within `10 kappa eps`, the floor the last
+/// tangent's 1-norm condition estimate `kappa` predicts (computed once per
+/// increment, when first asked; the factor 10 covers the estimate's
+/// looseness and the few round-off-sized terms each residual sums), with
+/// `kappa < 1/eps` (past it the tangent is singular to working precision
+/// and nothing is attained). Never before two iterations. A stall with
+/// larger corrections (an ill-conditioned Newton cycling, G 5.3's beam
+/// without ghost) still fails the step.
+fn at_the_floor(
+    setup: &Setup,
+    last: &mut Option<(Vec<f64>, Factorisation)>,
+    residuals: &[f64],
+    correction: f64,
+    kappa: &mut Option<f64>,
+) -> Option<Attainable> {
+    let [.., before, rel] = residuals else { return None };
+    if residuals.len() < 3 || *rel < 0.5 * before || correction > f64::EPSILON.sqrt() {
+        return None;
+    }
+    let (k, f) = last.as_mut()?;
+    let kappa = *kappa.get_or_insert_with(|| condition_with(setup.matrix(k), setup.symmetry(), f).value);
+    let floor = 10.0 * kappa * f64::EPSILON;
+    (kappa < 1.0 / f64::EPSILON && *rel <= floor).then_some(Attainable {
+        residual: *rel,
+        floor,
+        condition: kappa,
+        correction,
+        tolerance: setup.frame.sim.params.tolerance,
+    })
 }
 
 /// Factorise the tangent `k` (the symbolic analysis made at the first

@@ -212,6 +212,40 @@ pub struct SolverReport {
     pub cutbacks: Vec<Cutback>,
     /// Increments that made up the step (1 without cutbacks).
     pub substeps: usize,
+    /// Newton stopped above the tolerance at the accuracy arithmetic
+    /// allows (the first such increment of the step; see [`Attainable`]).
+    pub attainable: Option<Attainable>,
+}
+
+/// A Newton solve that converged as far as arithmetic allows: the
+/// relative residual had stopped falling above the tolerance, at no more
+/// than the floor `10 kappa eps` that the last tangent's condition number
+/// `kappa` predicts (below `1/eps`), and the last correction moved the
+/// unknowns by at most `sqrt(eps)` of their size (round-off).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Attainable {
+    /// The relative residual where Newton stopped.
+    pub residual: f64,
+    /// The floor `10 kappa eps`.
+    pub floor: f64,
+    /// The 1-norm condition estimate `kappa` of the last tangent.
+    pub condition: f64,
+    /// The last correction relative to the unknowns, `|dd| / |d|`.
+    pub correction: f64,
+    /// The tolerance the residual did not reach.
+    pub tolerance: f64,
+}
+
+impl std::fmt::Display for Attainable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "converged to attainable accuracy: residual {:.2e} above the tolerance {:.0e} but within the \
+             round-off floor {:.2e} = 10 kappa eps (kappa {:.2e}), last correction {:.1e} of the unknowns \
+             (at round-off: below sqrt(eps))",
+            self.residual, self.tolerance, self.floor, self.condition, self.correction
+        )
+    }
 }
 
 /// An increment that failed and was halved: the step went on from the

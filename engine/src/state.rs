@@ -197,9 +197,19 @@ impl Simulation {
         self.state.step as f64 / self.load_steps() as f64
     }
 
-    /// Cells holding points after the last step.
+    /// The cells the last step was solved on (the points' bases reached
+    /// them at its start; before the first step, the cells they reach).
     pub fn active_cells(&self) -> &[usize] {
         &self.state.active_cells
+    }
+
+    /// The cells the next step will be solved on: those the points' bases
+    /// reach in the configuration it starts from (the current one; the
+    /// starting one with `update_points = false`).
+    pub fn cells_of_next_step(&self) -> Vec<usize> {
+        let (m, pts) = (&self.model, &self.state.points);
+        let x = if m.analysis.update_points { &pts.x } else { &pts.x0 };
+        crate::assembly::active_cells_at(&m.grid, pts, x, &m.bodies)
     }
 
     /// Commit a quasi-static step (`points`: the fields it wrote, moved in
@@ -539,13 +549,7 @@ pub(crate) fn check_points(
     step: usize,
     residuals: &[f64],
 ) -> Result<(), StepFailure> {
-    if let Some(p) = (0..pts.len()).find(|&p| !pts.stress[p].iter().chain(&pts.x[p]).all(|v| v.is_finite())) {
-        return Err(StepFailure::NonFinite {
-            step,
-            what: format!("stress or position at point {p}"),
-            residuals: residuals.to_vec(),
-        });
-    }
+    check_finite(pts, step, residuals)?;
     if let Some(p) = (0..pts.len()).find(|&p| grid.cell_of(pts.x[p]).is_none()) {
         return Err(StepFailure::LeftGrid {
             step,
@@ -555,6 +559,18 @@ pub(crate) fn check_points(
         });
     }
     Ok(())
+}
+
+/// A step's updated points must have finite stresses and positions.
+pub(crate) fn check_finite(pts: &Points, step: usize, residuals: &[f64]) -> Result<(), StepFailure> {
+    match (0..pts.len()).find(|&p| !pts.stress[p].iter().chain(&pts.x[p]).all(|v| v.is_finite())) {
+        Some(p) => Err(StepFailure::NonFinite {
+            step,
+            what: format!("stress or position at point {p}"),
+            residuals: residuals.to_vec(),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// The mass pattern and symbolic Cholesky of the last step, reused while

@@ -309,6 +309,7 @@ pub fn plan() -> Plan {
     benchmarks::g_beam(&mut p);
     benchmarks::g_dynamics(&mut p);
     benchmarks::newmark(&mut p);
+    benchmarks::cook(&mut p);
     p
 }
 

@@ -88,10 +88,17 @@ pub(super) fn params(p: &Params) -> Result<(), String> {
 pub(super) fn state(s: &State, model: &Model) -> Result<(), String> {
     let p = &s.points;
     let grid = &model.grid;
-    each("points.x", &p.x, "must be finite and inside the grid", |x| {
-        finite(x) && grid.cell_of(x).is_some()
-    })?;
-    each("points.x0", &p.x0, "must be finite", finite)?;
+    // The configuration the steps solve on must lie on the grid: the
+    // current one, or with `update_points = false` the starting one (the
+    // moved points are then only drawn).
+    let inside = |x: [f64; 2]| finite(x) && grid.cell_of(x).is_some();
+    if model.analysis.update_points {
+        each("points.x", &p.x, "must be finite and inside the grid", inside)?;
+        each("points.x0", &p.x0, "must be finite", finite)?;
+    } else {
+        each("points.x", &p.x, "must be finite", finite)?;
+        each("points.x0", &p.x0, "must be finite and inside the grid", inside)?;
+    }
     let size = "must be zero or positive and finite";
     for (name, v) in [
         ("points.vol", &p.vol),

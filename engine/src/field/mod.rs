@@ -65,6 +65,12 @@ impl Field {
         }
     }
 
+    /// Whether the field takes both signs (a stress component: drawn with
+    /// a diverging colour map centred at zero) or is a magnitude.
+    pub fn signed(self) -> bool {
+        matches!(self, Field::SigmaXx | Field::SigmaYy | Field::SigmaXy)
+    }
+
     /// A short name for files and recordings (`sigma_yy`, `speed`, ...).
     pub fn key(self) -> &'static str {
         match self {

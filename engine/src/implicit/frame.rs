@@ -2,6 +2,7 @@
 //! implicit boundaries' prescribed motion and band operators, the ghost
 //! faces.
 
+use super::bbar::Bbar;
 use crate::assembly::{Dof, Mapping};
 use crate::bulk::BandView;
 use crate::geometry::P2;
@@ -57,6 +58,8 @@ pub(crate) struct Frame<'s> {
     pub faces: Vec<GhostFace>,
     /// `gamma_K` (G (27)).
     pub gamma: f64,
+    /// Small strain with `analysis.fbar`: the B-bar patches.
+    pub bbar: Option<Bbar>,
 }
 
 impl<'s> Frame<'s> {
@@ -115,6 +118,8 @@ impl<'s> Frame<'s> {
                 .collect(),
             _ => Vec::new(),
         };
+        let bbar = (!finite && model.analysis.fbar)
+            .then(|| Bbar::new(&map, pts, |p| ibm.as_ref().is_some_and(|s| s.in_band[p])));
         Ok(Frame {
             sim,
             step,
@@ -126,6 +131,7 @@ impl<'s> Frame<'s> {
             ops,
             faces,
             gamma,
+            bbar,
         })
     }
 

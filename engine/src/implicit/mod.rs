@@ -14,6 +14,7 @@
 //! on the residual with the points' finite-deformation response.
 
 pub(crate) mod band;
+pub(crate) mod bbar;
 mod contribution;
 mod frame;
 mod ghost;

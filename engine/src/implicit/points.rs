@@ -1,7 +1,8 @@
 //! The material points as a contribution: under small strain (B section 2,
 //! C section 2) the linear response's stiffness per point group,
 //! `K = sum_p B_p^T D B_p V_p`, with `B_bar` (C (18)) for the points inside
-//! an implicit boundary's band (its forces are the small-strain step's
+//! an implicit boundary's band and the B-bar patches' operator
+//! ([`super::bbar`]) with `fbar` (its forces are the small-strain step's
 //! right-hand side, [`crate::linear`]); under finite deformation (G 2.1)
 //! their internal force and tangent ([`crate::bulk`]).
 
@@ -24,14 +25,22 @@ impl Contribution for SmallStrainPoints {
         frame.map.groups.iter().map(|g| g.nodes.as_slice()).collect()
     }
 
-    /// The in-band points' `int (B_bar)^T D B d^a` (C (27)).
+    /// The in-band points' `int (B_bar)^T D B d^a` (C (27)); with B-bar,
+    /// a patch's points' `B_bar^T D B_bar d^a`.
     fn prescribed(&self, frame: &Frame, f_d: &mut [P2]) {
         let Some(s) = &frame.ibm else { return };
         let (sim, pts) = (frame.sim, &frame.sim.state.points);
         for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
             let st = frame.map.stencils.get(p);
+            let d = sim.material_of(p).d_matrix();
+            if let Some(bb) = frame.bbar.as_ref() {
+                if let (Some(op), Some(eps)) = (bb.op(&frame.map, p), bb.strain(&frame.map, p, &s.da)) {
+                    ibm::add_bt_c_eps(st, &op, &d, eps, pts.vol[p], f_d);
+                    continue;
+                }
+            }
             let (bbar, _) = s.point_b(st, pts.x[p]);
-            ibm::add_fd(st, &bbar, &sim.material_of(p).d_matrix(), &s.da, pts.vol[p], f_d);
+            ibm::add_fd(st, &bbar, &d, &s.da, pts.vol[p], f_d);
         }
     }
 
@@ -40,17 +49,24 @@ impl Contribution for SmallStrainPoints {
         let (map, pts) = (&frame.map, &sim.state.points);
         let d_of = |p: usize| sim.material_of(p).d_matrix();
         let g = &map.groups[k];
-        match &frame.ibm {
-            Some(s) if g.points.iter().any(|&p| s.in_band[p]) => {
-                let m2 = 2 * g.nodes.len();
-                out.clear();
-                out.resize(m2 * m2, 0.0);
-                for &p in &g.points {
-                    let (bb, _) = s.point_b(map.stencils.get(p), pts.x[p]);
-                    ibm::add_atcb(&bb, &d_of(p), &bb, pts.vol[p], out);
-                }
-            }
-            _ => map.group_stiffness(g, pts, &d_of, out),
+        let band = frame.ibm.as_ref().filter(|s| g.points.iter().any(|&p| s.in_band[p]));
+        if band.is_none() && frame.bbar.is_none() {
+            map.group_stiffness(g, pts, &d_of, out);
+            return Ok(());
+        }
+        // Per point its operator: a B-bar patch's, else C (18)'s in a
+        // band, else the plain B.
+        let m2 = 2 * g.nodes.len();
+        out.clear();
+        out.resize(m2 * m2, 0.0);
+        for &p in &g.points {
+            let st = map.stencils.get(p);
+            let op = match (frame.bbar.as_ref().and_then(|b| b.op(map, p)), band) {
+                (Some(op), _) => op,
+                (None, Some(s)) => s.point_b(st, pts.x[p]).0,
+                (None, None) => ibm::plain_b(st),
+            };
+            ibm::add_atcb(&op, &d_of(p), &op, pts.vol[p], out);
         }
         Ok(())
     }

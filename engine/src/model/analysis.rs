@@ -25,10 +25,18 @@ pub(super) fn validate_solver(a: &AnalysisSpec) -> Result<(), FieldError> {
     if !(a.gamma_k >= 0.0 && a.gamma_k.is_finite()) {
         return Err(FieldError::new("analysis.gamma_k", "must be zero (off) or positive"));
     }
-    if a.fbar && !a.kind.is_newton() {
+    if a.fbar && a.kind == crate::scene::AnalysisKind::ExplicitDynamics {
         return Err(FieldError::new(
             "analysis.fbar",
-            "F-bar modifies the finite-deformation (Newton) path only: kind = \"quasi-static-finite\" or \"dynamic-implicit\"",
+            "F-bar modifies the implicit paths only: kind = \"quasi-static-finite\" or \"dynamic-implicit\" \
+             (F-bar), or \"quasi-static-linear\" (its small-strain counterpart, B-bar)",
+        ));
+    }
+    if !a.update_points && a.kind != crate::scene::AnalysisKind::QuasiStaticLinear {
+        return Err(FieldError::new(
+            "analysis.update_points",
+            "only the small-strain analysis (kind = \"quasi-static-linear\") can stay on one configuration: \
+             the others follow the material by their definition",
         ));
     }
     if a.dense_limit > MAX_DENSE_LIMIT {

@@ -61,6 +61,13 @@ pub(super) fn build(
         };
         if spec.moves {
             check_moves(k, spec, &poly)?;
+            if !scene.analysis.update_points {
+                return Err(FieldError::new(
+                    format!("ibm[{k}].moves"),
+                    "a moving boundary moves the configuration, and `analysis.update_points = false` keeps \
+                     the starting one: prescribe the displacement on a boundary that stays (`moves = false`)",
+                ));
+            }
         }
         b.side = material_side(k, spec, &b, &poly, grid, regions)?;
         ibm.push(b);

@@ -217,7 +217,7 @@ impl Model {
         let a = resolve_delta(&scene.analysis, &grid)?;
         let ibm = ibm::build(scene, &grid, &a, &boundaries, &points, &regions, exact.as_ref())?;
         let record = record::build(&scene.record, a.kind)?;
-        let probes = probes::build(scene, &points, &boundaries, &ibm)?;
+        let probes = probes::build(scene, &points, &regions, &boundaries, &ibm)?;
 
         Ok(Model {
             name: scene.scene.name.clone(),

@@ -35,6 +35,28 @@ pub struct RecordSettings {
     /// Per-point values recorded with the positions (which are always
     /// recorded, with colours and radii).
     pub fields: Vec<Field>,
+    /// The colour scale: one over the whole run, or each frame's own.
+    pub colour_range: ColourRange,
+    /// Small strain: the drawn positions are `x0 + s u` with this `s`
+    /// (`None`: chosen from the first step, [`deformation_scale`]).
+    pub deformation_scale: Option<f64>,
+}
+
+pub use crate::scene::ColourRange;
+
+/// The deformation scale a small-strain recording draws with when the
+/// scene gives none: the displacement extrapolated to the full load
+/// (`u_max / lambda`, the analysis being linear) drawn as a tenth of the
+/// bodies' extent `size`, or true scale when it is already smaller (a
+/// linear analysis at a load of the order of E moves a hole's edges by
+/// more than its radius: drawn true, the hole collapses to a slit).
+pub fn deformation_scale(u_max: f64, lambda: f64, size: f64) -> f64 {
+    let full = u_max / lambda.max(f64::MIN_POSITIVE);
+    if full > 0.1 * size && full.is_finite() {
+        0.1 * size / full
+    } else {
+        1.0
+    }
 }
 
 impl Default for RecordSettings {
@@ -43,6 +65,8 @@ impl Default for RecordSettings {
         RecordSettings {
             cadence: Cadence::Auto,
             fields: DEFAULT_FIELDS.to_vec(),
+            colour_range: ColourRange::Run,
+            deformation_scale: None,
         }
     }
 }
@@ -114,7 +138,24 @@ pub(super) fn build(spec: &RecordSpec, kind: AnalysisKind) -> Result<RecordSetti
         None => DEFAULT_FIELDS.to_vec(),
         Some(names) => parse_fields(&names.names()).map_err(|m| FieldError::new("record.fields", m))?,
     };
-    Ok(RecordSettings { cadence, fields })
+    if let Some(s) = spec.deformation_scale {
+        if !(s > 0.0 && s.is_finite()) {
+            return Err(FieldError::new("record.deformation_scale", "must be a positive number"));
+        }
+        if kind != AnalysisKind::QuasiStaticLinear {
+            return Err(FieldError::new(
+                "record.deformation_scale",
+                "only small-strain analyses (kind = \"quasi-static-linear\") draw a scaled deformation: \
+                 the others draw the configuration they solve on",
+            ));
+        }
+    }
+    Ok(RecordSettings {
+        cadence,
+        fields,
+        colour_range: spec.colour_range,
+        deformation_scale: spec.deformation_scale,
+    })
 }
 
 /// A cadence resolved for one run: which steps hold points.

@@ -1,6 +1,8 @@
 //! Probes: named quantities followed through a run (`[[probe]]` in a
-//! scene): the material point nearest a position (its displacement and
-//! stress: a beam's tip, a corner), a B-spline boundary (its traction
+//! scene): the fields at a material position (displacement, velocity in
+//! dynamics, stress: a beam's tip, a corner; fitted from the points around
+//! it, `fit.rs`), the material point nearest a position (on request), a
+//! B-spline boundary (its traction
 //! resultant and the mean displacement of its tracking points) or an
 //! implicit boundary (its reaction and its prescribed displacement: a
 //! footing's load against its settlement).
@@ -12,15 +14,22 @@
 //! `values.rs` (so that the model can hold probes without depending on the
 //! simulation).
 
+mod fit;
 mod values;
+
+pub use fit::FieldFit;
 
 use crate::geometry::P2;
 use crate::units::Quantity;
 
 /// What a probe follows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum ProbeTarget {
-    /// Material point `p` (the nearest to the probe's position at the start).
+    /// The fields at the probe's material position, fitted from the
+    /// points around it ([`FieldFit`]; `point = "field"`, the default).
+    Field(FieldFit),
+    /// Material point `p`: the one with volume nearest to the probe's
+    /// position at the start (`point = "nearest"`).
     Point(usize),
     /// B-spline boundary `b` of the model.
     Boundary(usize),
@@ -33,9 +42,12 @@ pub enum ProbeTarget {
 pub struct Probe {
     pub name: String,
     pub target: ProbeTarget,
-    /// The position asked for (`at`), for a point probe: its values tend
-    /// to the field's at this position as the points are refined.
+    /// The position asked for (`at`), for a field or point probe: a field
+    /// probe's values are the fields' there; a nearest point's tend to
+    /// them as the points are refined.
     pub at: Option<P2>,
+    /// Whether a field or point probe reports velocities (dynamics).
+    pub velocity: bool,
 }
 
 /// A probe's values at a state.
@@ -47,7 +59,9 @@ pub struct ProbeValue {
     /// displacement at the load factor (a spline-following one: the mean
     /// of its spline's tracking points).
     pub u: P2,
-    /// A point's Cauchy stress `[xx, yy, xy]`.
+    /// Velocity (length/time) of the field or the point, in dynamics.
+    pub v: Option<P2>,
+    /// The field's or the point's Cauchy stress `[xx, yy, xy]`.
     pub stress: Option<[f64; 3]>,
     /// Force per unit thickness: a boundary's traction resultant at the
     /// step's load factor, or the reaction an implicit boundary exerts on
@@ -57,11 +71,14 @@ pub struct ProbeValue {
 }
 
 impl ProbeValue {
-    /// The values as `(key, quantity, value)`: `ux`, `uy`, then `sxx`,
-    /// `syy`, `sxy` for a point or `fx`, `fy` for a boundary. The keys of a
-    /// probe are the same at every step.
+    /// The values as `(key, quantity, value)`: `ux`, `uy`, then `vx`, `vy`
+    /// in dynamics and `sxx`, `syy`, `sxy` for a position, or `fx`, `fy`
+    /// for a boundary. The keys of a probe are the same at every step.
     pub fn columns(&self) -> Vec<(&'static str, Quantity, f64)> {
         let mut c = vec![("ux", Quantity::Length, self.u[0]), ("uy", Quantity::Length, self.u[1])];
+        if let Some(v) = self.v {
+            c.extend([("vx", Quantity::Velocity, v[0]), ("vy", Quantity::Velocity, v[1])]);
+        }
         if let Some(s) = self.stress {
             c.extend([
                 ("sxx", Quantity::Stress, s[0]),

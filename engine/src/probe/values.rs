@@ -30,17 +30,29 @@ impl Simulation {
         m.probes
             .iter()
             .map(|probe| {
-                let (u, stress, force) = match probe.target {
-                    ProbeTarget::Point(p) => (pts.displacement(p), Some(pts.stress[p]), None),
+                let velocity = |v: P2| probe.velocity.then_some(v);
+                let (u, v, stress, force) = match &probe.target {
+                    ProbeTarget::Field(fit) => (
+                        fit.apply(|p| pts.displacement(p)),
+                        velocity(fit.apply(|p| pts.velocity(p))),
+                        Some(fit.apply(|p| pts.stress[p])),
+                        None,
+                    ),
+                    ProbeTarget::Point(p) => (
+                        pts.displacement(*p),
+                        velocity(pts.velocity(*p)),
+                        Some(pts.stress[*p]),
+                        None,
+                    ),
                     ProbeTarget::Boundary(b) => {
-                        let name = &m.boundaries[b].name;
+                        let name = &m.boundaries[*b].name;
                         let f = report
                             .and_then(|r| r.boundaries.iter().find(|x| &x.name == name))
                             .map_or(unknown, |x| x.resultant);
-                        (mean_displacement(self, &m.boundaries[b].points), None, Some(f))
+                        (mean_displacement(self, &m.boundaries[*b].points), None, None, Some(f))
                     }
                     ProbeTarget::Ibm(b) => {
-                        let ib = &m.ibm[b];
+                        let ib = &m.ibm[*b];
                         let f = report
                             .and_then(|r| r.ibm.iter().find(|x| x.name == ib.name))
                             .map_or(unknown, |x| x.reaction);
@@ -51,12 +63,13 @@ impl Simulation {
                                 [d[0] * l, d[1] * l]
                             }
                         };
-                        (u, None, Some(f))
+                        (u, None, None, Some(f))
                     }
                 };
                 ProbeValue {
                     name: probe.name.clone(),
                     u,
+                    v,
                     stress,
                     force,
                 }

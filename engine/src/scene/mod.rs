@@ -48,19 +48,36 @@ pub struct Scene {
 }
 
 /// `[[probe]]`: a named quantity followed through the run (see
-/// [`crate::probe`]). Give exactly one of `at` (the material point nearest
-/// this position at the start), `boundary` (a `[[boundary]]`'s name) or
-/// `ibm` (an `[[ibm]]`'s name).
+/// [`crate::probe`]). Give exactly one of `at` (a material position: the
+/// fields there, or with `point = "nearest"` the material point nearest
+/// it at the start), `boundary` (a `[[boundary]]`'s name) or `ibm` (an
+/// `[[ibm]]`'s name).
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProbeSpec {
     pub name: String,
     #[serde(default)]
     pub at: Option<[f64; 2]>,
+    /// With `at`: what answers (default the fields at the position).
+    #[serde(default)]
+    pub point: Option<ProbeRead>,
     #[serde(default)]
     pub boundary: Option<String>,
     #[serde(default)]
     pub ibm: Option<String>,
+}
+
+/// `point = "field" | "nearest"` of a `[[probe]]` with `at`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ProbeRead {
+    /// The displacement, velocity and stress fields at the material
+    /// position, fitted from the points around it
+    /// ([`crate::probe::FieldFit`]).
+    #[default]
+    Field,
+    /// The material point with volume nearest to the position at the start.
+    Nearest,
 }
 
 /// `[record]`: what the run's recording holds (checked in
@@ -80,6 +97,28 @@ pub struct RecordSpec {
     /// ...; `"all"` for every one; default the colour field `sigma_yy`).
     #[serde(default)]
     pub fields: Option<FieldNames>,
+    /// The points' colour scale: fixed over the run (`"run"`, default) or
+    /// each frame's own (`"frame"`).
+    #[serde(default)]
+    pub colour_range: ColourRange,
+    /// Small strain: draw the points at `x0 + s u` with this scale `s`
+    /// (default: chosen so the full-load displacement is a tenth of the
+    /// bodies' extent, or 1 when it is smaller already).
+    #[serde(default)]
+    pub deformation_scale: Option<f64>,
+}
+
+/// `[record] colour_range`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ColourRange {
+    /// One scale for every frame: the envelope of the run's values (while
+    /// the run goes on, of the frames so far; the finished recording
+    /// recolours every frame with the whole run's).
+    #[default]
+    Run,
+    /// Each frame's own values.
+    Frame,
 }
 
 /// `fields = "all"` or `fields = ["sigma_yy", "speed"]`.
@@ -677,6 +716,14 @@ pub struct AnalysisSpec {
     /// volumetric part of each point's deformation is its cell's mean.
     #[serde(default)]
     pub fbar: bool,
+    /// Small strain: whether each load step moves the points
+    /// (`x += N du`, `V *= det(I + grad du)`) so that the next step is
+    /// solved on the moved configuration (an incremental analysis, the
+    /// default), or every step is solved on the starting configuration
+    /// (`false`: a linear analysis of one configuration; the points'
+    /// displacements still accumulate, their positions are drawn moved).
+    #[serde(default = "yes")]
+    pub update_points: bool,
     /// Which cells the ghost face set treats as active.
     #[serde(default)]
     pub ghost_cells: GhostCells,
@@ -725,6 +772,10 @@ pub struct AnalysisSpec {
 
 fn one() -> usize {
     1
+}
+
+fn yes() -> bool {
+    true
 }
 
 fn default_bossak_alpha() -> f64 {

@@ -609,3 +609,58 @@ fn tip_period_and_amplitude(o: &Outcome) -> (f64, f64) {
     };
     (period, peak(end - 4.0) / peak(0.0))
 }
+
+/// Cook's membrane (Cook 1974), against an independent finite-element
+/// reference (`scripts/cook_reference.py`: scikit-fem, Q2 in plane stress,
+/// Taylor-Hood Q2-Q1 displacement-pressure near incompressibility, meshes
+/// to 128 x 128 extrapolated; bars 0.001, 0.012, 0.0033, 0.0019); the
+/// literature's 23.96 is the middle of the loaded edge. Small strain on
+/// one configuration, h = 1 (48 cells across), bilinear bases: first
+/// order in h (the clamped edge's corners are singular), 0.2-0.7% here.
+pub(super) fn cook(p: &mut Plan) {
+    p.run("cook", "cook-membrane", |_| {});
+    p.run("cook-incompressible", "cook-membrane-incompressible", |_| {});
+    p.run("cook-incompressible-plain", "cook-membrane-incompressible", |s| {
+        s.analysis.fbar = false
+    });
+    let why = "first order in h at h = 1 (48 cells across), under 1% (0.5% for the mid-edge in plane stress)";
+    for (id, what, probe, reference, tol) in [
+        ("cook", "plane stress: u_y at the middle of the loaded edge (48, 52)", "mid", 23.9677, 0.005),
+        ("cook", "plane stress: u_y at the top corner (48, 60)", "corner", 25.189, 0.01),
+        (
+            "cook-incompressible",
+            "nu = 0.4999, B-bar (fbar): u_y at the top corner (48, 60)",
+            "corner",
+            7.7713,
+            0.01,
+        ),
+        (
+            "cook-incompressible",
+            "nu = 0.4999, B-bar (fbar): u_y at the middle of the loaded edge",
+            "mid",
+            7.4047,
+            0.01,
+        ),
+    ] {
+        p.check(
+            "Cook / FE reference",
+            what,
+            reference,
+            Rule::Relative(tol),
+            true,
+            why,
+            &[id],
+            move |o| o.run(id).probe(probe, "uy"),
+        );
+    }
+    p.check(
+        "Cook / FE reference",
+        "nu = 0.4999 without B-bar: u_y at the corner (locks)",
+        7.7713,
+        Rule::AtMost(0.8 * 7.7713),
+        true,
+        "volumetric locking: the plain small-strain B moves the corner at least 20% too little",
+        &["cook-incompressible-plain"],
+        |o| o.run("cook-incompressible-plain").probe("corner", "uy"),
+    );
+}

@@ -470,6 +470,8 @@ golden! {
     collapse_von_mises => "collapse-von-mises",
     column_self_weight => "column-self-weight",
     column_small_strain => "column-small-strain",
+    cook_membrane => "cook-membrane",
+    cook_membrane_incompressible => "cook-membrane-incompressible",
     deep_beam_self_weight => "deep-beam-self-weight",
     elastic_beam_ghost => "elastic-beam-ghost",
     fe_equivalence => "fe-equivalence",
