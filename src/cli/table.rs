@@ -198,6 +198,9 @@ impl Observer for Table {
                 c.reason
             );
         }
+        if let Some(a) = r.solver.as_ref().and_then(|s| s.attainable) {
+            out!("       step {}: {a}", r.step);
+        }
         self.total_time += r.timings.total;
         self.phases.add(&r.timings);
         self.cutbacks += r.cutbacks().len();

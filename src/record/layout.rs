@@ -10,8 +10,8 @@
 //! the drawn space, with y negated. The scene view's title says so.
 //!
 //! Drawing order (higher on top): grid, occupied cells, active cells, cells
-//! an implicit boundary cuts, points, ghost faces, boundaries, control
-//! points, the colour bar.
+//! an implicit boundary cuts, ghost faces, points, grid conditions,
+//! boundaries, control points, loads, probes, the colour bar.
 
 use crate::field::Field;
 use crate::units::Units;
@@ -68,15 +68,18 @@ pub mod order {
     pub const OCCUPIED: f32 = 2.0;
     pub const ACTIVE: f32 = 3.0;
     pub const CUT_CELLS: f32 = 4.0;
+    pub const GHOST_FACES: f32 = 9.0;
     pub const POINTS: f32 = 10.0;
-    pub const GHOST_FACES: f32 = 20.0;
+    pub const CONDITIONS: f32 = 25.0;
+    pub const LOADS: f32 = 32.0;
+    pub const PROBES: f32 = 33.0;
     pub const BOUNDARY: f32 = 30.0;
     pub const CONTROL_POINTS: f32 = 31.0;
     pub const LEGEND: f32 = 40.0;
 }
 
 /// The scene's top-level entities, each flipped so that physical up is up.
-pub const SCENE_ROOTS: [&str; 5] = ["points", "grid", "boundaries", "ibm", "legend"];
+pub const SCENE_ROOTS: [&str; 7] = ["points", "grid", "boundaries", "ibm", "legend", "loads", "probes"];
 
 /// The static transform of every scene root: y scaled by -1.
 pub fn y_up() -> rerun::Transform3D {
@@ -95,11 +98,14 @@ pub mod palette {
     pub const WHITE: [u8; 3] = [230, 230, 230];
 }
 
-/// The look of one time series: its entity, legend name and colour.
+/// The look of one time series: its entity, legend name and colour, and
+/// whether each value is marked whatever the run's length (a series
+/// sampled every few steps: a line alone bridges its gaps unseen).
 pub struct Series {
     pub path: String,
     pub name: String,
     pub color: [u8; 3],
+    pub marked: bool,
 }
 
 impl Series {
@@ -108,8 +114,22 @@ impl Series {
             path: path.into(),
             name: name.into(),
             color,
+            marked: false,
         }
     }
+
+    /// The series with every value marked.
+    pub fn marked(mut self) -> Series {
+        self.marked = true;
+        self
+    }
+}
+
+/// The probe series of one unit: the panel's title and the series' paths.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ProbePanel {
+    pub title: String,
+    pub paths: Vec<String>,
 }
 
 /// Runs of at most this many steps mark every value of a series (a line
@@ -121,8 +141,9 @@ pub const MARKED_STEPS: usize = 100;
 pub struct Contents {
     /// The scene's unit system (titles).
     pub units: Units,
-    /// The scene has `[[probe]]`s (a panel of their values per step).
-    pub probes: bool,
+    /// The `[[probe]]`s' series, one panel per unit (displacements,
+    /// velocities, stresses, forces).
+    pub probes: Vec<ProbePanel>,
     /// Explicit dynamics (energies against time, no Newton residuals).
     pub dynamic: bool,
     /// Finite deformation with Newton iterations (else one linear solve a step).
@@ -151,17 +172,9 @@ impl Contents {
             s.push(Series::new(e("total"), "kinetic + strain", WHITE));
             s.push(Series::new(e("balance_error_relative"), "balance error / W0", PINK));
             if self.condition {
-                s.push(Series::new(
-                    "metrics/log10/condition/mass_stabilised",
-                    "stabilised",
-                    GREEN,
-                ));
-                s.push(Series::new("metrics/log10/condition/mass_lumped", "lumped", SKY));
-                s.push(Series::new(
-                    "metrics/log10/condition/mass_consistent",
-                    "consistent",
-                    VERMILLION,
-                ));
+                s.push(Series::new("metrics/log10/condition/mass_stabilised", "stabilised", GREEN).marked());
+                s.push(Series::new("metrics/log10/condition/mass_lumped", "lumped", SKY).marked());
+                s.push(Series::new("metrics/log10/condition/mass_consistent", "consistent", VERMILLION).marked());
             }
         } else {
             s.push(Series::new(e("strain"), "strain", ORANGE));
@@ -173,16 +186,15 @@ impl Contents {
                 "strain + plastic - external work",
                 PINK,
             ));
-            s.push(Series::new(
-                "metrics/log10/condition/stiffness",
-                if self.ghost { "with ghost" } else { "stiffness" },
-                GREEN,
-            ));
-            s.push(Series::new(
-                "metrics/log10/condition/stiffness_unstabilised",
-                "without ghost",
-                VERMILLION,
-            ));
+            s.push(
+                Series::new(
+                    "metrics/log10/condition/stiffness",
+                    if self.ghost { "with ghost" } else { "stiffness" },
+                    GREEN,
+                )
+                .marked(),
+            );
+            s.push(Series::new("metrics/log10/condition/stiffness_unstabilised", "without ghost", VERMILLION).marked());
             s.push(Series::new("metrics/newton/iterations", "iterations", SKY));
         }
         s
@@ -210,9 +222,24 @@ impl Contents {
             self.colour
         ))
         .with_origin("/")
-        .with_contents(["/points", "/grid/**", "/boundaries/**", "/ibm/**", "/legend/**"]);
+        .with_contents([
+            "/points",
+            "/grid/**",
+            "/boundaries/**",
+            "/ibm/**",
+            "/legend/**",
+            "/loads/**",
+            "/probes/**",
+        ]);
         let mut panels: Vec<ContainerLike> = Vec::new();
-        let energy = titled("energy", self.units, Quantity::Energy);
+        // The x axis of every time series is the time panel's timeline:
+        // the titles name it.
+        let x = if self.dynamic {
+            format!("against time ({})", unit(self.units, Quantity::Time))
+        } else {
+            "against load step".to_string()
+        };
+        let energy = format!("{} {x}", titled("energy", self.units, Quantity::Energy));
         if self.dynamic {
             panels.push(
                 TimeSeriesView::new(energy.clone())
@@ -225,30 +252,29 @@ impl Contents {
                     .into(),
             );
             panels.push(
-                TimeSeriesView::new("energy balance error / W0 (G 5.2)")
+                TimeSeriesView::new(format!("energy balance error / W0 (G 5.2) {x}"))
                     .with_contents(["/metrics/energy/balance_error_relative"])
                     .into(),
             );
             if self.condition {
                 panels.push(
-                    TimeSeriesView::new("log10 cond., mass: stab., lumped")
-                        .with_contents([
-                            "/metrics/log10/condition/mass_stabilised",
-                            "/metrics/log10/condition/mass_lumped",
-                        ])
-                        .into(),
-                );
-                panels.push(
-                    TimeSeriesView::new("log10 cond., consistent mass")
-                        .with_contents(["/metrics/log10/condition/mass_consistent"])
-                        .into(),
+                    TimeSeriesView::new(format!(
+                        "log10 condition number of the mass: stabilised, lumped, consistent {x} \
+                         (marked where sampled; singular ones are events)"
+                    ))
+                    .with_contents([
+                        "/metrics/log10/condition/mass_stabilised",
+                        "/metrics/log10/condition/mass_lumped",
+                        "/metrics/log10/condition/mass_consistent",
+                    ])
+                    .into(),
                 );
             }
         } else {
             let residual = if self.newton {
-                "log10 |r|/|r0|, Newton, this step"
+                "Newton residual history of the step at the cursor: log10 |r|/|r0| against iteration"
             } else {
-                "log10 |K du - r|/|r|, this step"
+                "linear solve's residual history of the step at the cursor: log10 |K du - r|/|r| against refinement"
             };
             panels.push(
                 BarChartView::new(residual)
@@ -257,7 +283,7 @@ impl Contents {
             );
             if self.newton {
                 panels.push(
-                    TimeSeriesView::new("Newton iterations per step")
+                    TimeSeriesView::new(format!("Newton iterations per step {x}"))
                         .with_contents(["/metrics/newton/iterations"])
                         .into(),
                 );
@@ -265,20 +291,16 @@ impl Contents {
             if self.condition {
                 panels.push(
                     TimeSeriesView::new(if self.ghost {
-                        "log10 cond., with ghost"
+                        format!("log10 condition number, with and without ghost {x} (singular ones are events)")
                     } else {
-                        "log10 condition number of the stiffness"
+                        format!("log10 condition number of the stiffness {x} (singular ones are events)")
                     })
-                    .with_contents(["/metrics/log10/condition/stiffness"])
+                    .with_contents([
+                        "/metrics/log10/condition/stiffness",
+                        "/metrics/log10/condition/stiffness_unstabilised",
+                    ])
                     .into(),
                 );
-                if self.ghost {
-                    panels.push(
-                        TimeSeriesView::new("log10 cond., without ghost")
-                            .with_contents(["/metrics/log10/condition/stiffness_unstabilised"])
-                            .into(),
-                    );
-                }
             }
             panels.push(
                 TimeSeriesView::new(energy.clone())
@@ -294,21 +316,16 @@ impl Contents {
         }
         if self.exact {
             panels.push(
-                TimeSeriesView::new("log10 error vs exact solution")
+                TimeSeriesView::new(format!("log10 error vs exact solution {x}"))
                     .with_origin("/metrics/log10/error")
                     .into(),
             );
         }
-        if self.probes {
+        for p in &self.probes {
             panels.push(
-                TimeSeriesView::new(format!(
-                    "probes (displacements {}, stresses {}, forces {})",
-                    self.units.of(crate::units::Quantity::Length),
-                    self.units.of(crate::units::Quantity::Stress),
-                    self.units.of(crate::units::Quantity::Force)
-                ))
-                .with_origin("/metrics/probe")
-                .into(),
+                TimeSeriesView::new(format!("{} {x}", p.title))
+                    .with_contents(p.paths.iter().map(|q| format!("/{q}")))
+                    .into(),
             );
         }
         panels.push(

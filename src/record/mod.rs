@@ -10,8 +10,8 @@
 //! | `grid` | LineStrips2D | static |
 //! | `recording` | TextDocument (the cadence and the per-point fields) | static |
 //! | `recording/fields` | TextLog (the per-point fields, comma-separated) | static |
-//! | `grid/active` | LineStrips2D (outlines of the cells the step was solved on: those of the points at its start) | frames |
-//! | `grid/occupied` | LineStrips2D (outlines of the cells holding the points shown, at the step's end) | frames |
+//! | `grid/active` | LineStrips2D (outlines of the cells the next step solves on: those the points shown reach, or with `update_points = false` those of the starting configuration) | frames |
+//! | `grid/occupied` | LineStrips2D (the cells holding the points shown, drawn inset) | frames |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of the recorded fields (of `sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | frames |
 //! | `legend/colour_bar` | LineStrips2D (the colour map under the grid, low values left) | static |
 //! | `legend/range` | Points2D (a label: the colour field, its unit and the frame's range) | frames |
@@ -96,6 +96,15 @@ fn cell_box(g: &crate::grid::Grid, c: usize) -> [[f32; 2]; 5] {
     [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
 }
 
+/// Cell `c` drawn a sixth of a cell inside its grid lines.
+fn inset_box(g: &crate::grid::Grid, c: usize) -> [[f32; 2]; 5] {
+    let m = g.cell_min(c % g.nx, c / g.nx);
+    let d = g.h / 6.0;
+    let (x0, y0) = ((m[0] + d) as f32, (m[1] + d) as f32);
+    let (x1, y1) = ((m[0] + g.h - d) as f32, (m[1] + g.h - d) as f32);
+    [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+}
+
 /// The bulky part of a point frame: copied from the simulation on the
 /// engine's thread into reused buffers (plain copies, no rerun types) and
 /// turned into rerun data on the recorder's own thread, so that a step
@@ -106,22 +115,37 @@ struct Frame {
     time: Option<f64>,
     positions: Vec<[f32; 2]>,
     radii: Vec<f32>,
-    /// The values the points are coloured by.
+    /// The values the points are coloured by, the scale they are
+    /// coloured with and what the frame's values are, in words.
     colour: Vec<f64>,
+    scale: colormap::Scale,
+    described: String,
     /// The recorded fields' values per point.
     fields: Vec<(&'static str, Vec<f64>)>,
-    /// Cells holding points.
+    /// The cells the next step solves on: those the points' bases reach
+    /// in the configuration it starts from.
     cells: Vec<usize>,
     ghost: Vec<[[f32; 2]; 2]>,
 }
 
 impl Frame {
-    fn fill(&mut self, sim: &Simulation, colour: Field, fields: &[Field]) {
+    /// Copy the state of `sim`: positions drawn at `x0 + s u` with the
+    /// deformation scale `s` (1: where the points are).
+    fn fill(&mut self, sim: &Simulation, colour: Field, fields: &[Field], s: f64) {
         self.step = sim.step_index() as i64;
         self.time = sim.time();
         let pts = sim.points();
         self.positions.clear();
-        self.positions.extend(pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]));
+        if s == 1.0 {
+            self.positions.extend(pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]));
+        } else {
+            self.positions.extend(pts.x.iter().zip(&pts.x0).map(|(x, x0)| {
+                [
+                    (x0[0] + s * (x[0] - x0[0])) as f32,
+                    (x0[1] + s * (x[1] - x0[1])) as f32,
+                ]
+            }));
+        }
         self.radii.clear();
         self.radii
             .extend(pts.vol.iter().map(|v| (0.5 * v.max(0.0).sqrt()) as f32));
@@ -135,8 +159,7 @@ impl Frame {
             };
             (f.key(), v)
         }));
-        self.cells.clear();
-        self.cells.extend_from_slice(sim.active_cells());
+        self.cells = sim.cells_of_next_step();
         self.ghost.clear();
         self.ghost.extend(
             sim.ghost_faces()
@@ -289,12 +312,7 @@ fn write_frame(
     if let Some(t) = f.time {
         rec.set_duration_secs("time", t);
     }
-    let (lo, hi) = colormap::range(f.colour.iter().copied());
-    colors.clear();
-    colors.extend(f.colour.iter().map(|&v| {
-        let [r, g, b] = colormap::viridis(colormap::unit(v, lo, hi));
-        rerun::Color::from_rgb(r, g, b)
-    }));
+    colours_of(&f.scale, &f.colour, colors);
     rec.log(
         "points",
         &rerun::Points2D::new(f.positions.iter().copied())
@@ -310,10 +328,11 @@ fn write_frame(
         }
         rec.log("points", &values)?;
     }
-    rec.log("legend/range", &legend.range(lo, hi))?;
-    // The cells holding the points now: after a large step they differ
-    // from the active cells, which are those of the step's start (the
-    // mesh the step was solved on, with its ghost faces).
+    rec.log("legend/range", &legend.range(&f.scale, &f.described))?;
+    rec.log("legend/ticks", &legend.ticks(&f.scale))?;
+    // The cells holding the points shown, drawn inset (squares inside the
+    // grid's lines, not lines on them); the active cells are the mesh the
+    // next step solves on, from the points as they are now.
     let mut occupied: Vec<usize> = f
         .positions
         .iter()
@@ -327,8 +346,8 @@ fn write_frame(
     occupied.dedup();
     rec.log(
         "grid/occupied",
-        &rerun::LineStrips2D::new(occupied.iter().map(|&c| cell_box(g, c)))
-            .with_colors([rerun::Color::from_rgb(110, 110, 140)])
+        &rerun::LineStrips2D::new(occupied.iter().map(|&c| inset_box(g, c)))
+            .with_colors([rerun::Color::from_rgb(150, 120, 190)])
             .with_radii([rerun::Radius::new_ui_points(0.75)])
             .with_draw_order(order::OCCUPIED),
     )?;
@@ -343,11 +362,20 @@ fn write_frame(
         "grid/ghost_faces",
         &rerun::LineStrips2D::new(f.ghost.iter().copied())
             .with_colors([rerun::Color::from_rgb(240, 140, 20)])
-            .with_radii([rerun::Radius::new_ui_points(2.5)])
+            .with_radii([rerun::Radius::new_ui_points(0.75)])
             .with_draw_order(order::GHOST_FACES),
     )?;
     rec.reset_time();
     Ok(())
+}
+
+/// The points' colours on `scale`.
+fn colours_of(scale: &colormap::Scale, values: &[f64], out: &mut Vec<rerun::Color>) {
+    out.clear();
+    out.extend(values.iter().map(|&v| {
+        let [r, g, b] = scale.colour(v);
+        rerun::Color::from_rgb(r, g, b)
+    }));
 }
 
 /// A colour bar under the grid: the colour map as a row of segments
@@ -380,15 +408,17 @@ impl ColourBar {
         }
     }
 
-    fn bar(&self) -> rerun::LineStrips2D {
+    /// The bar of a signed field's map (diverging) or a magnitude's.
+    fn bar(&self, signed: bool) -> rerun::LineStrips2D {
         let n = Self::SEGMENTS;
         let dx = (self.x[1] - self.x[0]) / n as f32;
         let strips = (0..n).map(|k| {
             let x = self.x[0] + k as f32 * dx;
             [[x, self.y], [x + dx, self.y]]
         });
+        let unit = colormap::Scale { signed, lo: 0.0, hi: 1.0 };
         let colours = (0..n).map(|k| {
-            let [r, g, b] = colormap::viridis((k as f64 + 0.5) / n as f64);
+            let [r, g, b] = unit.colour((k as f64 + 0.5) / n as f64);
             rerun::Color::from_rgb(r, g, b)
         });
         rerun::LineStrips2D::new(strips)
@@ -397,19 +427,36 @@ impl ColourBar {
             .with_draw_order(order::LEGEND)
     }
 
-    /// The label: the field and the range of the frame's values, from the
-    /// bar's left end (min) to its right end (max).
-    fn range(&self, lo: f64, hi: f64) -> rerun::Points2D {
-        let label = if hi > lo {
-            format!("{}: {lo:.3e} (left) .. {hi:.3e} (right)", self.title)
-        } else {
-            format!("{}: uniform {lo:.3e}", self.title)
-        };
+    /// The label: the field, what the frame's values are (their range,
+    /// or `uniform V ± S`) and the scale the colours span.
+    fn range(&self, scale: &colormap::Scale, described: &str) -> rerun::Points2D {
+        let label = format!(
+            "{}: this frame {described}; colours {:.3e} .. {:.3e}{}",
+            self.title,
+            scale.lo,
+            scale.hi,
+            if scale.signed { " (0 grey)" } else { "" }
+        );
         rerun::Points2D::new([[0.5 * (self.x[0] + self.x[1]), self.label_y]])
             .with_labels([label])
             .with_colors([rerun::Color::from_rgb(230, 230, 230)])
             .with_radii([rerun::Radius::new_ui_points(0.5)])
             .with_draw_order(order::LEGEND)
+    }
+}
+
+impl ColourBar {
+    /// Ticks under the bar: five labelled marks from its left end (`lo`)
+    /// to its right end (`hi`), zero in the middle of a signed scale.
+    fn ticks(&self, scale: &colormap::Scale) -> rerun::Points2D {
+        let values = scale.ticks(5);
+        let n = values.len() as f32 - 1.0;
+        let at = (0..values.len()).map(|k| [self.x[0] + (self.x[1] - self.x[0]) * k as f32 / n, self.y]);
+        rerun::Points2D::new(at)
+            .with_labels(values.iter().map(|v| format!("{v:.2e}")))
+            .with_colors([rerun::Color::from_rgb(230, 230, 230)])
+            .with_radii([rerun::Radius::new_ui_points(2.0)])
+            .with_draw_order(order::LEGEND + 1.0)
     }
 }
 
@@ -484,8 +531,36 @@ fn contents(sim: &Simulation, colour: Field) -> Contents {
         exact: m.exact.is_some(),
         colour: titled(colour.key(), m.units, Quantity::Field(colour)),
         units: m.units,
-        probes: !m.probes.is_empty(),
+        probes: probe_panels(sim),
     }
+}
+
+/// The probes' series, one panel per unit, in the order displacements,
+/// velocities, stresses, forces.
+fn probe_panels(sim: &Simulation) -> Vec<layout::ProbePanel> {
+    use crate::units::Quantity as Q;
+    let units = sim.model().units;
+    let mut panels: Vec<(Q, &str, Vec<String>)> = vec![
+        (Q::Length, "probes: displacements", Vec::new()),
+        (Q::Velocity, "probes: velocities", Vec::new()),
+        (Q::Stress, "probes: stresses", Vec::new()),
+        (Q::Force, "probes: forces", Vec::new()),
+    ];
+    for p in sim.probe_values(None) {
+        for (key, q, _) in p.columns() {
+            if let Some(panel) = panels.iter_mut().find(|x| x.0 == q) {
+                panel.2.push(format!("metrics/probe/{}/{key}", p.name));
+            }
+        }
+    }
+    panels
+        .into_iter()
+        .filter(|p| !p.2.is_empty())
+        .map(|(q, title, paths)| layout::ProbePanel {
+            title: format!("{title} ({})", units.of(q)),
+            paths,
+        })
+        .collect()
 }
 
 /// Writes one run to an `.rrd` file.
@@ -526,6 +601,25 @@ pub struct Recorder {
     /// first): a step is flushed sooner than the period once that cost is
     /// at most [`SYNC_SHARE`] of the time since the last flush.
     sync_cost: Option<std::time::Duration>,
+    /// The colour bar, and with `colour_range = "run"` the run's colour
+    /// scale so far and the frames to colour again with the final one.
+    legend: ColourBar,
+    scale: Option<colormap::Scale>,
+    recolour: Vec<Recolour>,
+    /// Small strain: the deformation scale the points are drawn with,
+    /// once known.
+    deformation: Option<f64>,
+    /// The scene's unit system (events' units).
+    units: crate::units::Units,
+}
+
+/// A frame logged with a colour scale the run later widened.
+struct Recolour {
+    step: i64,
+    time: Option<f64>,
+    scale: colormap::Scale,
+    values: Vec<f64>,
+    described: String,
 }
 
 /// The default longest time between flushes of a recording into its file:
@@ -663,6 +757,11 @@ impl Recorder {
             sync_period: SYNC_PERIOD,
             last_sync: std::time::Instant::now(),
             sync_cost: None,
+            legend: legend.clone(),
+            scale: None,
+            recolour: Vec::new(),
+            deformation: None,
+            units: sim.model().units,
         };
         // A recording that cannot take its header and first state (a
         // full disk already) is removed: the run has not started.
@@ -749,7 +848,7 @@ impl Recorder {
                         .with_widths([1.5]),
                 ),
             )?;
-            if self.marked {
+            if self.marked || s.marked {
                 self.check(
                     self.rec.log_static(
                         s.path.as_str(),
@@ -787,9 +886,15 @@ impl Recorder {
                 "Points (positions, colours by {}, radii) {}.\n\nPer-point fields: {}.\n\nMetrics and events: every step.\n\n\
                  The scene is drawn with y up: each of its entities is flipped by a static transform, so a \
                  point's `positions` are its true coordinates while the view's hover position has y negated.\n\n\
-                 At a step, `grid/active` (blue) are the cells the step was solved on, those of the points \
-                 at its start, with the ghost faces (orange) of that mesh; `grid/occupied` (grey) are the \
-                 cells holding the points shown, at its end.",
+                 At a step, `grid/active` (blue) are the cells the next step solves on: those the bases of \
+                 the points shown reach (with `update_points = false`, those of the starting configuration); \
+                 `grid/occupied` (violet squares inside the grid lines) are the cells holding the points \
+                 shown (a small-strain drawing at a deformation scale other than 1 shows the points, and \
+                 these, scaled, while the active cells stay those of the true configuration); the ghost faces (thin, orange, under the points) are those of the step's own mesh. \
+                 A point's radius is half the square root of its volume (its side were it a square: 0.5 \
+                 sqrt(V)). Colours: a stress component on a diverging map (blue negative, grey zero, red \
+                 positive) over a range symmetric about zero; a magnitude on viridis from zero; by default \
+                 one range over the run (`[record] colour_range`).",
                 self.field.key(),
                 self.cadence(),
                 if fields.is_empty() { "none".to_string() } else { fields.join(", ") }
@@ -819,7 +924,127 @@ impl Recorder {
                     .with_draw_order(order::GRID),
             ),
         )?;
-        self.check(self.rec.log_static("legend/colour_bar", &legend.bar()))
+        self.check(self.rec.log_static("legend/colour_bar", &legend.bar(self.field.signed())))?;
+        self.log_conditions(sim)
+    }
+
+    /// The grid-line conditions (static: grid lines do not move), each
+    /// labelled with its kind and prescribed value, and gravity as an
+    /// arrow at the grid's top-left corner.
+    fn log_conditions(&self, sim: &Simulation) -> Result<(), RecordError> {
+        use crate::model::GridTarget;
+        let m = sim.model();
+        let (g, u) = (&m.grid, m.units);
+        let len = u.of(crate::units::Quantity::Length);
+        let max = g.max();
+        for (k, c) in m.dirichlet.iter().enumerate() {
+            let named: Vec<String> = c
+                .value
+                .iter()
+                .zip(["u_x", "u_y"])
+                .filter_map(|(v, n)| v.map(|v| format!("{n} = {v}")))
+                .collect();
+            let kind = if named.len() == 2 { "fixed" } else { "roller" };
+            let (strip, place) = match c.target {
+                GridTarget::Line { axis: 0, index } => {
+                    let x = g.origin[0] + index as f64 * g.h;
+                    (vec![[x, g.origin[1]], [x, max[1]]], format!("x = {x}"))
+                }
+                GridTarget::Line { index, .. } => {
+                    let y = g.origin[1] + index as f64 * g.h;
+                    (vec![[g.origin[0], y], [max[0], y]], format!("y = {y}"))
+                }
+                GridTarget::Node(n) => {
+                    let x = g.node_position(n);
+                    (vec![x, x], format!("node ({}, {})", x[0], x[1]))
+                }
+            };
+            let label = format!("{kind} {place}: {} {len} (grid line condition)", named.join(", "));
+            let strip: Vec<[f32; 2]> = strip.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
+            self.check(
+                self.rec.log_static(
+                    format!("grid/conditions/{k}"),
+                    &rerun::LineStrips2D::new([strip])
+                        .with_colors([rerun::Color::from_rgb(204, 121, 167)])
+                        .with_radii([rerun::Radius::new_ui_points(2.0)])
+                        .with_labels([label])
+                        .with_draw_order(order::CONDITIONS),
+                ),
+            )?;
+        }
+        if m.gravity != [0.0; 2] {
+            let n = m.gravity[0].hypot(m.gravity[1]);
+            let a = 2.0 * g.h / n;
+            self.check(
+                self.rec.log_static(
+                    "loads/gravity",
+                    &rerun::Arrows2D::from_vectors([[(a * m.gravity[0]) as f32, (a * m.gravity[1]) as f32]])
+                        .with_origins([[(g.origin[0] + g.h) as f32, (max[1] - g.h) as f32]])
+                        .with_labels([format!(
+                            "gravity ({}, {}) {len}/{}^2",
+                            m.gravity[0],
+                            m.gravity[1],
+                            u.of(crate::units::Quantity::Time)
+                        )])
+                        .with_colors([rerun::Color::from_rgb(86, 180, 233)])
+                        .with_draw_order(order::LOADS),
+                ),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The point loads (arrows two cells long at their points, labelled
+    /// with the force at load factor 1) and the probes at their positions
+    /// (labelled), drawn with the points at deformation scale `s`.
+    fn log_loads_and_probes(&self, sim: &Simulation, s: f64) -> Result<(), RecordError> {
+        let m = sim.model();
+        let pts = sim.points();
+        let drawn = |x: [f64; 2], u: [f64; 2]| [(x[0] + s * u[0]) as f32, (x[1] + s * u[1]) as f32];
+        let force = m.units.of(crate::units::Quantity::Force);
+        for (k, l) in m.point_loads.iter().enumerate() {
+            let n = l.force[0].hypot(l.force[1]);
+            if n == 0.0 {
+                continue;
+            }
+            let a = 2.0 * m.grid.h / n;
+            self.check(
+                self.rec.log(
+                    format!("loads/point/{k}"),
+                    &rerun::Arrows2D::from_vectors([[(a * l.force[0]) as f32, (a * l.force[1]) as f32]])
+                        .with_origins([drawn(pts.x0[l.point], pts.displacement(l.point))])
+                        .with_labels([format!("F ({:.3e}, {:.3e}) {force}", l.force[0], l.force[1])])
+                        .with_colors([rerun::Color::from_rgb(86, 180, 233)])
+                        .with_draw_order(order::LOADS),
+                ),
+            )?;
+        }
+        let mut at = Vec::new();
+        let mut names = Vec::new();
+        for (p, v) in m.probes.iter().zip(sim.probe_values(None)) {
+            let x0 = match p.target {
+                crate::probe::ProbeTarget::Point(q) => pts.x0[q],
+                _ => match p.at {
+                    Some(a) => a,
+                    None => continue,
+                },
+            };
+            at.push(drawn(x0, v.u));
+            names.push(format!("probe {}", p.name));
+        }
+        if !at.is_empty() {
+            self.check(
+                self.rec.log(
+                    "probes",
+                    &rerun::Points2D::new(at)
+                        .with_labels(names)
+                        .with_colors([rerun::Color::from_rgb(240, 228, 66)])
+                        .with_radii([rerun::Radius::new_ui_points(4.0)])
+                        .with_draw_order(order::PROBES),
+                ),
+            )?;
+        }
+        Ok(())
     }
 
     /// Log the points (with the recorded fields), the active cells and the
@@ -839,7 +1064,9 @@ impl Recorder {
         self.last_frame = Some(step);
         self.frames.insert(step);
         let mut frame = self.writer.spare.try_recv().unwrap_or_default();
-        frame.fill(sim, self.field, &self.settings.fields);
+        let drawn = self.deformation_scale(sim)?;
+        frame.fill(sim, self.field, &self.settings.fields, drawn);
+        self.scale_frame(&mut frame, drawn);
         if let Some(tx) = &self.writer.frames {
             if tx.send(Job::Frame(frame)).is_err() {
                 return Err(RecordError::Write {
@@ -856,6 +1083,7 @@ impl Recorder {
         if let Some(t) = sim.time() {
             self.rec.set_duration_secs("time", t);
         }
+        self.log_loads_and_probes(sim, drawn)?;
         let g = &sim.model().grid;
         for b in &sim.ibm_boundaries() {
             let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
@@ -865,7 +1093,14 @@ impl Recorder {
                     &rerun::LineStrips2D::new([line])
                         .with_colors([rerun::Color::from_rgb(40, 200, 220)])
                         .with_radii([rerun::Radius::new_ui_points(2.5)])
-                        .with_labels([format!("{} (implicit Dirichlet)", b.name)])
+                        .with_labels([format!(
+                            "{} (implicit {})",
+                            b.name,
+                            match b.kind {
+                                crate::scene::DirichletKind::Roller => "roller",
+                                crate::scene::DirichletKind::Fixed => "fixed",
+                            }
+                        )])
                         .with_draw_order(order::BOUNDARY),
                 ),
             )?;
@@ -917,6 +1152,104 @@ impl Recorder {
         Ok(())
     }
 
+    /// The frame's colour scale: its own, or the run's so far (kept, with
+    /// the values, to colour the frame again when the run's widens); and
+    /// its values in words, with the deformation scale it is drawn at.
+    fn scale_frame(&mut self, frame: &mut Frame, drawn: f64) {
+        let own = colormap::Scale::of(frame.colour.iter().copied(), self.field.signed());
+        frame.described = colormap::describe(frame.colour.iter().copied());
+        if drawn != 1.0 {
+            frame.described = format!("{}; deformation drawn x{drawn:.3e}", frame.described);
+        }
+        frame.scale = match self.settings.colour_range {
+            crate::model::record::ColourRange::Frame => own,
+            crate::model::record::ColourRange::Run => {
+                let run = self.scale.map_or(own, |s| s.widen(own));
+                self.scale = Some(run);
+                self.recolour.push(Recolour {
+                    step: frame.step,
+                    time: frame.time,
+                    scale: run,
+                    values: frame.colour.clone(),
+                    described: frame.described.clone(),
+                });
+                run
+            }
+        };
+    }
+
+    /// Small strain: the scale the points' displacements are drawn at
+    /// (the scene's, or [`crate::model::record::deformation_scale`] of the
+    /// first state with a displacement, said in an event); 1 otherwise.
+    fn deformation_scale(&mut self, sim: &Simulation) -> Result<f64, RecordError> {
+        if sim.model().analysis.kind != crate::scene::AnalysisKind::QuasiStaticLinear {
+            return Ok(1.0);
+        }
+        if let Some(s) = self.deformation {
+            return Ok(s);
+        }
+        let pts = sim.points();
+        let u_max = (0..pts.len())
+            .map(|p| pts.displacement(p))
+            .map(|u| u[0].hypot(u[1]))
+            .fold(0.0, f64::max);
+        let s = match self.settings.deformation_scale {
+            Some(s) => s,
+            None if u_max > 0.0 && sim.load_factor() > 0.0 => {
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for x in &pts.x0 {
+                    for c in 0..2 {
+                        lo[c] = lo[c].min(x[c]);
+                        hi[c] = hi[c].max(x[c]);
+                    }
+                }
+                let size = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+                crate::model::record::deformation_scale(u_max, sim.load_factor(), size)
+            }
+            None => return Ok(1.0),
+        };
+        self.deformation = Some(s);
+        // Said when the drawing is not true to scale (each frame's label
+        // says it too).
+        if s != 1.0 {
+            self.event(
+                &format!(
+                    "small strain: the points are drawn at x0 + {s} u{}",
+                    if self.settings.deformation_scale.is_some() {
+                        " (the scene's deformation_scale)"
+                    } else {
+                        " (the full-load displacement drawn as a tenth of the bodies' extent; \
+                         [record] deformation_scale sets it)"
+                    }
+                ),
+                rerun::TextLogLevel::INFO,
+            )?;
+        }
+        Ok(s)
+    }
+
+    /// With `colour_range = "run"`: colour every frame logged with a
+    /// narrower scale than the run's final one again with it.
+    fn recolour_frames(&mut self) -> Result<(), RecordError> {
+        let Some(run) = self.scale else { return Ok(()) };
+        let mut colors = Vec::new();
+        for f in std::mem::take(&mut self.recolour).into_iter().filter(|f| f.scale != run) {
+            self.rec.set_time_sequence("step", f.step);
+            if let Some(t) = f.time {
+                self.rec.set_duration_secs("time", t);
+            }
+            colours_of(&run, &f.values, &mut colors);
+            self.check(
+                self.rec
+                    .log("points", &rerun::Points2D::update_fields().with_colors(colors.iter().copied())),
+            )?;
+            self.check(self.rec.log("legend/range", &self.legend.range(&run, &f.described)))?;
+            self.check(self.rec.log("legend/ticks", &self.legend.ticks(&run)))?;
+        }
+        self.rec.reset_time();
+        Ok(())
+    }
+
     /// Log the current state if the cadence left it out: the last state
     /// of a run that stops early or fails.
     pub fn log_final_state(&mut self, sim: &Simulation) -> Result<(), RecordError> {
@@ -926,6 +1259,50 @@ impl Recorder {
     fn scalar(&self, path: &str, v: f64) -> Result<(), RecordError> {
         if v.is_finite() {
             self.check(self.rec.log(path, &rerun::Scalars::single(v)))?;
+        }
+        Ok(())
+    }
+
+    /// A condition number `metrics/condition/<name>` (and its log10): a
+    /// number up to `1/eps`; past it (or infinite) the matrix is singular
+    /// to working precision, which an event says instead of a number.
+    fn condition(&self, step: usize, name: &str, what: &str, value: f64) -> Result<(), RecordError> {
+        if value.is_finite() && value <= 1.0 / f64::EPSILON {
+            self.scalar(&format!("metrics/condition/{name}"), value)?;
+            self.scalar(&format!("metrics/log10/condition/{name}"), value.log10())
+        } else {
+            self.event(
+                &format!(
+                    "step {step}: {what} is singular to working precision (condition estimate {value:.2e} > 1/eps = {:.2e})",
+                    1.0 / f64::EPSILON
+                ),
+                "WARN",
+            )
+        }
+    }
+
+    /// The step's warnings as events on the timeline: traction lost on
+    /// inactive nodes, a regularised implicit-boundary fit (cutbacks and
+    /// a stop at the round-off floor are logged with the solver's metrics).
+    fn log_warnings(&self, report: &StepReport) -> Result<(), RecordError> {
+        let force = self.units.of(crate::units::Quantity::Force);
+        for b in report.boundaries.iter().filter(|b| b.lost > 0.0) {
+            self.event(
+                &format!(
+                    "step {}: boundary `{}` LOST {:.3e} {force} of its traction on inactive nodes",
+                    report.step, b.name, b.lost
+                ),
+                "WARN",
+            )?;
+        }
+        for b in report.ibm.iter().filter(|b| b.fit_regularisation > 0.0) {
+            self.event(
+                &format!(
+                    "step {}: implicit boundary `{}`: the exact field's fit was regularised (weight {:e})",
+                    report.step, b.name, b.fit_regularisation
+                ),
+                "WARN",
+            )?;
         }
         Ok(())
     }
@@ -942,13 +1319,17 @@ impl Recorder {
             self.log_dynamics(report, d)?;
         }
         if let (true, Some(c)) = (tangent, &report.condition) {
-            self.scalar("metrics/condition/stiffness", c.value)?;
-            self.scalar("metrics/log10/condition/stiffness", c.value.log10())?;
+            self.condition(report.step, "stiffness", "the stiffness", c.value)?;
         }
         if let (true, Some(c)) = (tangent, &report.condition_unstabilised) {
-            self.scalar("metrics/condition/stiffness_unstabilised", c.value)?;
-            self.scalar("metrics/log10/condition/stiffness_unstabilised", c.value.log10())?;
+            self.condition(
+                report.step,
+                "stiffness_unstabilised",
+                "the stiffness without ghost",
+                c.value,
+            )?;
         }
+        self.log_warnings(report)?;
         self.scalar("metrics/newton/iterations", report.iterations as f64)?;
         self.scalar("metrics/ghost/faces", report.ghost_faces as f64)?;
         self.scalar("metrics/energy/plastic_dissipation", report.energy.plastic_dissipation)?;
@@ -1006,6 +1387,9 @@ impl Recorder {
                 ),
                 "WARN",
             )?;
+        }
+        if let Some(a) = report.solver.as_ref().and_then(|s| s.attainable) {
+            self.event(&format!("step {}: {a}", report.step), "WARN")?;
         }
         for b in &report.ibm {
             let base = format!("metrics/ibm/{}", b.name);
@@ -1088,13 +1472,12 @@ impl Recorder {
         self.scalar("metrics/momentum/y", d.momentum[1])?;
         self.scalar("metrics/dynamics/max_grid_speed", d.max_speed)?;
         if let Some(c) = &d.conditioning {
-            for (name, v) in [
-                ("mass_consistent", c.mass_consistent.value),
-                ("mass_stabilised", c.mass_stabilised.value),
-                ("mass_lumped", c.mass_lumped.value),
+            for (name, what, v) in [
+                ("mass_consistent", "the consistent mass", c.mass_consistent.value),
+                ("mass_stabilised", "the stabilised mass", c.mass_stabilised.value),
+                ("mass_lumped", "the lumped mass", c.mass_lumped.value),
             ] {
-                self.scalar(&format!("metrics/condition/{name}"), v)?;
-                self.scalar(&format!("metrics/log10/condition/{name}"), v.log10())?;
+                self.condition(report.step, name, what, v)?;
             }
             for (name, v) in [
                 ("consistent", c.cfl_consistent),
@@ -1199,6 +1582,9 @@ impl Recorder {
         let partial = self.staged.as_ref().map(|s| s.partial().to_path_buf());
         if let Some(e) = self.writer.join() {
             return Err(kept(&self.path, partial.as_deref(), e));
+        }
+        if let Err(e) = self.recolour_frames() {
+            return Err(kept(&self.path, partial.as_deref(), e.to_string()));
         }
         if let Err(e) = self.rec.flush_blocking() {
             return Err(kept(&self.path, partial.as_deref(), e.to_string()));

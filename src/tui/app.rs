@@ -769,6 +769,9 @@ impl App {
                 } else {
                     format!("step {} done in {:.3} s", report.step, report.timings.total)
                 };
+                if let Some(a) = report.solver.as_ref().and_then(|s| s.attainable) {
+                    self.status = format!("{}; {a}", self.status);
+                }
                 self.reports.push(*report);
                 self.view = *view;
             }

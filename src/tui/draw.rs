@@ -1101,7 +1101,7 @@ fn errors_line(r: &StepReport) -> Option<Line<'static>> {
     })
 }
 
-/// A probe's values on one line: `tip: u (ux, uy) m  s (xx, yy, xy) Pa`.
+/// A probe's values on one line: `tip: u (ux, uy) m  [v (vx, vy) m/s]  s (xx, yy, xy) Pa`.
 fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
     let mut s = format!(
         "probe {}: u ({:.3e}, {:.3e}) {}",
@@ -1110,6 +1110,9 @@ fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
         p.u[1],
         u.of(Quantity::Length)
     );
+    if let Some(v) = p.v {
+        s.push_str(&format!("  v ({:.3e}, {:.3e}) {}", v[0], v[1], u.of(Quantity::Velocity)));
+    }
     if let Some(t) = p.stress {
         s.push_str(&format!(
             "  s ({:.3e}, {:.3e}, {:.3e}) {}",
@@ -1129,9 +1132,13 @@ fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
 /// as in the run table ([`format::factor_label`]); and the cutbacks taken.
 fn solver_label(s: &crate::report::SolverReport) -> String {
     let f = format::factor_label(s);
-    match s.cutbacks.len() {
+    let f = match s.cutbacks.len() {
         0 => f,
         n => format!("{f} cut {n}"),
+    };
+    match s.attainable {
+        Some(a) => format!("{f}  at round-off floor {:.1e}", a.floor),
+        None => f,
     }
 }
 

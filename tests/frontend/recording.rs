@@ -580,7 +580,7 @@ fn the_scene_is_drawn_with_physical_y_up() {
             flipped.insert(c.entity_path().to_string(), s[0]);
         }
     }
-    for root in ["/points", "/grid", "/boundaries", "/ibm", "/legend"] {
+    for root in ["/points", "/grid", "/boundaries", "/ibm", "/legend", "/loads", "/probes"] {
         assert_eq!(flipped.get(root), Some(&[1.0, -1.0, 1.0]), "{root}: {flipped:?}");
     }
     let positions = rerun::Points2D::descriptor_positions().component;
@@ -594,14 +594,46 @@ fn the_scene_is_drawn_with_physical_y_up() {
         })
         .last()
         .unwrap();
-    let expected: Vec<[f32; 2]> = sim.points().x.iter().map(|x| [x[0] as f32, x[1] as f32]).collect();
-    assert_eq!(last, expected);
+    // The plate's linear solution at S = E moves its edges by more than
+    // the hole's radius: drawn at x0 + s u with the scale the recording
+    // names (a tenth of the extent for the full-load displacement).
+    let s = drawn_scale(&chunks);
+    assert!(s < 0.5, "{s}");
+    assert_eq!(last, drawn(&sim, s));
+}
+
+/// The deformation scale a small-strain recording names in its events (1
+/// when none is named: true scale).
+fn drawn_scale(chunks: &[rerun::log::Chunk]) -> f64 {
+    let text = rerun::TextLog::descriptor_text().component;
+    chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| {
+            c.iter_slices::<String>(text)
+                .flat_map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .find_map(|e| {
+            let rest = e.split("drawn at x0 + ").nth(1)?;
+            rest.split(' ').next()?.parse::<f64>().ok()
+        })
+        .unwrap_or(1.0)
+}
+
+/// The points as drawn at deformation scale `s`: `x0 + s (x - x0)`.
+fn drawn(sim: &mpmlab::Simulation, s: f64) -> Vec<[f32; 2]> {
+    let p = sim.points();
+    p.x.iter()
+        .zip(&p.x0)
+        .map(|(x, x0)| [(x0[0] + s * (x[0] - x0[0])) as f32, (x0[1] + s * (x[1] - x0[1])) as f32])
+        .collect()
 }
 
 #[test]
 fn occupied_cells_hold_the_points_shown() {
-    // After a step the active cells are those of its start; `grid/occupied`
-    // are the cells of the points shown: every point lies in one of them
+    // `grid/occupied` are the cells of the points shown (as drawn, at the
+    // small-strain deformation scale): every point lies in one of them
     // and each holds a point (checked on the boxes read back).
     let (chunks, _, sim) = record_steps("plate-hole-neumann", 1);
     let strips = rerun::LineStrips2D::descriptor_strips().component;
@@ -633,8 +665,13 @@ fn occupied_cells_hold_the_points_shown() {
         }
     }
     assert!(!boxes.is_empty());
-    let inside = |b: &[f32; 4], p: [f32; 2]| p[0] >= b[0] && p[0] <= b[2] && p[1] >= b[1] && p[1] <= b[3];
-    let pts: Vec<[f32; 2]> = sim.points().x.iter().map(|x| [x[0] as f32, x[1] as f32]).collect();
+    // Boxes are drawn a sixth of a cell inside the grid lines (2/3 of a
+    // cell wide): the cell is the box grown by a quarter of its width.
+    let inside = |b: &[f32; 4], p: [f32; 2]| {
+        let d = 0.25 * (b[2] - b[0]) + 1e-6;
+        p[0] >= b[0] - d && p[0] <= b[2] + d && p[1] >= b[1] - d && p[1] <= b[3] + d
+    };
+    let pts = drawn(&sim, drawn_scale(&chunks));
     for p in &pts {
         assert!(boxes.iter().any(|b| inside(b, *p)), "point {p:?} in no occupied cell");
     }
@@ -647,7 +684,9 @@ fn occupied_cells_hold_the_points_shown() {
 fn the_colour_bar_names_the_field_its_unit_and_range() {
     let (chunks, _, sim) = record_steps("column-small-strain", 1);
     let labels = rerun::Points2D::descriptor_labels().component;
-    let shown: Vec<String> = chunks
+    // Every frame's label, the step's among them (a finished recording
+    // adds the frames it coloured again with the run's scale).
+    let shown: Vec<Vec<String>> = chunks
         .iter()
         .filter(|c| c.entity_path().to_string() == "/legend/range")
         .flat_map(|c| {
@@ -655,13 +694,36 @@ fn the_colour_bar_names_the_field_its_unit_and_range() {
                 .map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
                 .collect::<Vec<_>>()
         })
-        .last()
-        .unwrap();
+        .collect();
     let syy: Vec<f64> = sim.points().stress.iter().map(|s| s[1]).collect();
     let (lo, hi) = syy
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-    assert_eq!(shown, [format!("sigma_yy (Pa): {lo:.3e} (left) .. {hi:.3e} (right)")]);
+    // A stress is signed: its colours span [-m, m], m = max |s_yy| over
+    // the run (here the last step's), grey at zero; the label also gives
+    // the frame's own range.
+    let m = lo.abs().max(hi.abs());
+    let want = vec![format!(
+        "sigma_yy (Pa): this frame {lo:.3e} .. {hi:.3e}; colours {:.3e} .. {m:.3e} (0 grey)",
+        -m
+    )];
+    assert!(shown.contains(&want), "{shown:?}");
+    // The initial state (zero stress) is one colour, grey, on the run's scale.
+    let initial = vec![format!("sigma_yy (Pa): this frame uniform 0.0000e0 ± 0.0e0; colours {:.3e} .. {m:.3e} (0 grey)", -m)];
+    assert!(shown.contains(&initial), "{shown:?}");
+    // Five ticks under the bar, from -m through 0 to m.
+    let ticks: Vec<String> = chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/legend/ticks")
+        .flat_map(|c| {
+            c.iter_slices::<String>(labels)
+                .map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .last()
+        .unwrap();
+    let want: Vec<String> = [-m, -0.5 * m, 0.0, 0.5 * m, m].iter().map(|v| format!("{v:.2e}")).collect();
+    assert_eq!(ticks, want);
 }
 
 #[test]
@@ -712,8 +774,8 @@ fn each_layout_shows_the_panels_its_run_has() {
     let (_, v, _) = record_steps("column-small-strain", 1);
     for s in [
         "scene, y up",
-        "|K du - r|/|r|, this step",
-        "condition number of the stiffness",
+        "log10 |K du - r|/|r| against refinement",
+        "condition number of the stiffness against load step",
         "energy (J/m)",
         "error vs exact",
         "events",
@@ -721,16 +783,17 @@ fn each_layout_shows_the_panels_its_run_has() {
         assert!(has(&v, s), "column: no `{s}` in {v:?}");
     }
     assert!(!has(&v, "without ghost") && !has(&v, "Newton"), "{v:?}");
-    // Newton with ghost and no exact solution: both condition numbers apart.
+    // Newton with ghost and no exact solution: both condition numbers on
+    // one plot (log10: 20 orders apart fit), probes one panel per unit.
     let (_, v, _) = record_steps("elastic-beam-ghost", 1);
     for s in [
-        "|r|/|r0|, Newton, this step",
-        "Newton iterations",
-        "cond., with ghost",
-        "cond., without ghost",
+        "Newton residual history of the step at the cursor: log10 |r|/|r0| against iteration",
+        "Newton iterations per step against load step",
+        "log10 condition number, with and without ghost against load step",
         "energy (J/m)",
         // G 5.5's tip, in the scene's units.
-        "probes (displacements m, stresses Pa, forces N/m)",
+        "probes: displacements (m)",
+        "probes: stresses (Pa)",
     ] {
         assert!(has(&v, s), "beam: no `{s}` in {v:?}");
     }
@@ -741,10 +804,9 @@ fn each_layout_shows_the_panels_its_run_has() {
     // Explicit dynamics: energies, their balance and the masses' conditioning.
     let (_, v, _) = record_steps("ghost-collision-elastic", 1);
     for s in [
-        "energy (J/m)",
+        "energy (J/m) against time (s)",
         "balance error",
-        "mass: stab., lumped",
-        "consistent mass",
+        "condition number of the mass: stabilised, lumped, consistent",
     ] {
         assert!(has(&v, s), "collision: no `{s}` in {v:?}");
     }
@@ -757,7 +819,8 @@ fn each_layout_shows_the_panels_its_run_has() {
     for s in [
         "sigma_yy (MPa)",
         "energy (N mm/mm)",
-        "probes (displacements mm, stresses MPa, forces N/mm)",
+        "probes: displacements (mm)",
+        "probes: forces (N/mm)",
     ] {
         assert!(has(&v, s), "block: no `{s}` in {v:?}");
     }
