@@ -51,7 +51,13 @@ pub fn unit(v: f64, lo: f64, hi: f64) -> f64 {
 /// A diverging map (after Moreland's cool-warm), blue through a light grey
 /// centre to red, for signed fields: every colour stays readable on the
 /// viewer's dark background and on a light one.
-const DIVERGING: [[u8; 3]; 5] = [[59, 76, 192], [141, 176, 254], [221, 221, 221], [244, 154, 123], [180, 4, 38]];
+const DIVERGING: [[u8; 3]; 5] = [
+    [59, 76, 192],
+    [141, 176, 254],
+    [221, 221, 221],
+    [244, 154, 123],
+    [180, 4, 38],
+];
 
 /// Piecewise-linear interpolation through `stops` at `t` in [0, 1].
 fn through(stops: &[[u8; 3]], t: f64) -> [u8; 3] {
@@ -73,12 +79,40 @@ pub struct Scale {
     pub hi: f64,
 }
 
+/// The share of the points whose values may lie beyond a frame's scale
+/// (drawn at its ends): a few points far off the field (a clipped sliver
+/// of volume at a hole's edge, a node held by almost no material) would
+/// otherwise stretch the map until the field itself is one colour.
+pub const OUTLIERS: f64 = 0.005;
+
 impl Scale {
-    /// The scale of `values`: `[-m, m]` with `m = max |v|` for a signed
-    /// field, `[min(0, v_min), v_max]` for a magnitude.
+    /// The scale of `values`: `[-m, m]` for a signed field, `[min(0, lo),
+    /// m]` for a magnitude, with `m` the largest `|v|` (magnitude: `v`)
+    /// once the [`OUTLIERS`] share of the largest is set aside.
     pub fn of(values: impl Iterator<Item = f64>, signed: bool) -> Scale {
-        let (lo, hi) = range(values);
-        Scale::spanning(lo, hi, signed)
+        let mut v: Vec<f64> = values.filter(|v| v.is_finite()).collect();
+        if v.is_empty() {
+            return Scale::spanning(0.0, 0.0, signed);
+        }
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        if signed {
+            v.iter_mut().for_each(|x| *x = x.abs());
+        }
+        // The value below which all but the largest OUTLIERS share lie.
+        let k = ((v.len() as f64) * (1.0 - OUTLIERS)).ceil() as usize;
+        let k = k.clamp(1, v.len()) - 1;
+        let (_, m, _) = v.select_nth_unstable_by(k, f64::total_cmp);
+        let m = *m;
+        if signed {
+            Scale::spanning(-m, m, true)
+        } else {
+            Scale::spanning(lo.min(m), m, false)
+        }
+    }
+
+    /// How many of `values` lie outside the scale (drawn at its ends).
+    pub fn beyond(&self, values: &[f64]) -> usize {
+        values.iter().filter(|v| **v < self.lo || **v > self.hi).count()
     }
 
     fn spanning(lo: f64, hi: f64, signed: bool) -> Scale {
@@ -124,12 +158,16 @@ impl Scale {
 }
 
 /// What the values of a frame are, in words: `uniform V ± S` when their
-/// spread is below 1e-6 of their size (or all are zero), else their range.
+/// spread is below 1e-6 of their size (or all are zero); `V ± S (R of the
+/// value)` when it is below 1e-3 (a range printed to four digits would
+/// show two equal numbers); else their range.
 pub fn describe(values: impl Iterator<Item = f64>) -> String {
     let (lo, hi) = range(values);
     let (mid, spread) = (0.5 * (lo + hi), 0.5 * (hi - lo));
     if spread <= 1e-6 * mid.abs() || hi == lo {
         format!("uniform {mid:.4e} ± {spread:.1e}")
+    } else if spread < 1e-3 * mid.abs() {
+        format!("{mid:.4e} ± {spread:.1e} ({:.1e} of the value)", spread / mid.abs())
     } else {
         format!("{lo:.3e} .. {hi:.3e}")
     }
@@ -155,6 +193,10 @@ mod tests {
         assert_eq!(describe([0.0, 0.0].into_iter()), "uniform 0.0000e0 ± 0.0e0");
         assert!(describe([5.0, 5.0 + 1e-6].into_iter()).starts_with("uniform 5.0000e0 ± "));
         assert_eq!(describe([1.0, 2.0].into_iter()), "1.000e0 .. 2.000e0");
+        assert_eq!(
+            describe([-2.0, -2.0002].into_iter()),
+            "-2.0001e0 ± 1.0e-4 (5.0e-5 of the value)"
+        );
     }
 
     #[test]
@@ -165,5 +207,20 @@ mod tests {
         let dark = s.colour(0.0);
         assert!(dark.iter().map(|&c| c as u32).sum::<u32>() > 200, "{dark:?}");
         assert_eq!(s.widen(Scale::of([6.0].into_iter(), false)).hi, 6.0);
+    }
+
+    #[test]
+    fn a_few_points_far_off_do_not_stretch_the_scale() {
+        // 1000 values in [-1, 1] and 3 at 100 (0.3% of the points).
+        let mut v: Vec<f64> = (0..1000).map(|k| -1.0 + 2.0 * k as f64 / 999.0).collect();
+        v.extend([100.0, -100.0, 100.0]);
+        // 0.5% of 1003 is 5 values set aside: the three and the two 1s.
+        let s = Scale::of(v.iter().copied(), true);
+        assert!(s.hi > 0.99 && s.hi < 1.0 && s.lo == -s.hi, "{s:?}");
+        assert_eq!(s.beyond(&v), 5);
+        assert_eq!(s.colour(100.0), DIVERGING[4]);
+        // Below the share, every value counts: 3 points alone.
+        let few = Scale::of([1.0, 2.0, 50.0].into_iter(), false);
+        assert_eq!(few.hi, 50.0);
     }
 }

@@ -224,7 +224,7 @@ fn finish_recording(mut rec: Recorder, sim: &Simulation, code: &mut ExitCode) {
     );
     match rec.finish() {
         Ok(size) => {
-            out!("recording: {p}  (replay: rerun {p})");
+            out!("recording: {p}  (replay: mpmlab replay {p})");
             out!("recording size: {size}");
         }
         Err(e) => *code = fail(3, e),

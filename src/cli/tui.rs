@@ -54,7 +54,7 @@ pub fn tui(a: &TuiArgs) -> Result<ExitCode> {
     let path = recorder.as_ref().map(|r| r.path().display().to_string());
     mpmlab::tui::run(sim, text, recorder).context("terminal UI")?;
     if let Some(p) = path {
-        out!("recording: {p}  (replay: rerun {p})");
+        out!("recording: {p}  (replay: mpmlab replay {p})");
     }
     Ok(ExitCode::SUCCESS)
 }

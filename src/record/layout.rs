@@ -194,7 +194,14 @@ impl Contents {
                 )
                 .marked(),
             );
-            s.push(Series::new("metrics/log10/condition/stiffness_unstabilised", "without ghost", VERMILLION).marked());
+            s.push(
+                Series::new(
+                    "metrics/log10/condition/stiffness_unstabilised",
+                    "without ghost",
+                    VERMILLION,
+                )
+                .marked(),
+            );
             s.push(Series::new("metrics/newton/iterations", "iterations", SKY));
         }
         s

@@ -13,8 +13,12 @@
 //! | `grid/active` | LineStrips2D (outlines of the cells the next step solves on: those the points shown reach, or with `update_points = false` those of the starting configuration) | frames |
 //! | `grid/occupied` | LineStrips2D (the cells holding the points shown, drawn inset) | frames |
 //! | `points` | Points2D, coloured by sigma_yy, radius from volume; and per point the values of the recorded fields (of `sigma_xx`, `sigma_yy`, `sigma_xy`, `displacement_magnitude`, `plastic_strain`, `speed`, `error`) | frames |
-//! | `legend/colour_bar` | LineStrips2D (the colour map under the grid, low values left) | static |
-//! | `legend/range` | Points2D (a label: the colour field, its unit and the frame's range) | frames |
+//! | `legend/colour_bar` | LineStrips2D (the colour map under the grid, low values left: diverging for a stress, viridis for a magnitude) | static |
+//! | `legend/range` | Points2D (a label: the colour field, its unit, the colours' range and the frame's values) | frames |
+//! | `legend/ticks` | Points2D (five labelled ticks under the bar) | frames |
+//! | `grid/conditions/<k>` | LineStrips2D (grid-line conditions, labelled with kind and value) | static |
+//! | `loads/gravity`, `loads/point/<k>` | Arrows2D (gravity, point loads; labelled) | static, frames |
+//! | `probes` | Points2D (the probes' positions, labelled) | frames |
 //! | `points`, `grid`, `boundaries`, `ibm`, `legend` | Transform3D (y scaled by -1: drawn with y up, [`layout`]) | static |
 //! | `ibm/<name>/line` | LineStrips2D (implicit Dirichlet boundaries, cyan, labelled) | frames |
 //! | `ibm/<name>/cut_cells` | LineStrips2D (cells the boundary cuts) | frames |
@@ -139,12 +143,12 @@ impl Frame {
         if s == 1.0 {
             self.positions.extend(pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]));
         } else {
-            self.positions.extend(pts.x.iter().zip(&pts.x0).map(|(x, x0)| {
-                [
-                    (x0[0] + s * (x[0] - x0[0])) as f32,
-                    (x0[1] + s * (x[1] - x0[1])) as f32,
-                ]
-            }));
+            self.positions.extend(
+                pts.x
+                    .iter()
+                    .zip(&pts.x0)
+                    .map(|(x, x0)| [(x0[0] + s * (x[0] - x0[0])) as f32, (x0[1] + s * (x[1] - x0[1])) as f32]),
+            );
         }
         self.radii.clear();
         self.radii
@@ -328,7 +332,10 @@ fn write_frame(
         }
         rec.log("points", &values)?;
     }
-    rec.log("legend/range", &legend.range(&f.scale, &f.described))?;
+    rec.log(
+        "legend/range",
+        &legend.range(&f.scale, &f.described, f.scale.beyond(&f.colour)),
+    )?;
     rec.log("legend/ticks", &legend.ticks(&f.scale))?;
     // The cells holding the points shown, drawn inset (squares inside the
     // grid's lines, not lines on them); the active cells are the mesh the
@@ -379,9 +386,10 @@ fn colours_of(scale: &colormap::Scale, values: &[f64], out: &mut Vec<rerun::Colo
 }
 
 /// A colour bar under the grid: the colour map as a row of segments
-/// (static) and, per frame, one label under the grid naming the field, its
-/// unit and the frame's range (centred, so that the view's bounds, fitted
-/// to the data, do not cut it).
+/// (static, 1.5 cells below the grid) with five labelled ticks, and per
+/// frame a two-line label under them naming the field, its unit, the
+/// colours' range and the frame's values (centred, so that the view's
+/// bounds, fitted to the data, do not cut it).
 #[derive(Clone)]
 struct ColourBar {
     /// Field title with its unit (`sigma_yy (Pa)`).
@@ -402,8 +410,8 @@ impl ColourBar {
         ColourBar {
             title,
             x: [g.origin[0] as f32, max[0] as f32],
-            y: (g.origin[1] - 2.0 * g.h) as f32,
-            label_y: (g.origin[1] - g.h) as f32,
+            y: (g.origin[1] - 1.5 * g.h) as f32,
+            label_y: (g.origin[1] - 3.5 * g.h) as f32,
             width: (0.5 * g.h) as f32,
         }
     }
@@ -416,7 +424,11 @@ impl ColourBar {
             let x = self.x[0] + k as f32 * dx;
             [[x, self.y], [x + dx, self.y]]
         });
-        let unit = colormap::Scale { signed, lo: 0.0, hi: 1.0 };
+        let unit = colormap::Scale {
+            signed,
+            lo: 0.0,
+            hi: 1.0,
+        };
         let colours = (0..n).map(|k| {
             let [r, g, b] = unit.colour((k as f64 + 0.5) / n as f64);
             rerun::Color::from_rgb(r, g, b)
@@ -428,14 +440,20 @@ impl ColourBar {
     }
 
     /// The label: the field, what the frame's values are (their range,
-    /// or `uniform V ± S`) and the scale the colours span.
-    fn range(&self, scale: &colormap::Scale, described: &str) -> rerun::Points2D {
+    /// or `uniform V ± S`), the scale the colours span and how many points
+    /// lie beyond it (drawn at its ends, [`colormap::OUTLIERS`]).
+    fn range(&self, scale: &colormap::Scale, described: &str, beyond: usize) -> rerun::Points2D {
+        // Two lines, each narrower than a small grid's view.
         let label = format!(
-            "{}: this frame {described}; colours {:.3e} .. {:.3e}{}",
+            "{}: colours {:.3e} .. {:.3e}{}{}\nthis frame {described}",
             self.title,
             scale.lo,
             scale.hi,
-            if scale.signed { " (0 grey)" } else { "" }
+            if scale.signed { " (0 grey)" } else { "" },
+            match beyond {
+                0 => String::new(),
+                n => format!(", {n} points beyond (at the ends)"),
+            }
         );
         rerun::Points2D::new([[0.5 * (self.x[0] + self.x[1]), self.label_y]])
             .with_labels([label])
@@ -924,7 +942,10 @@ impl Recorder {
                     .with_draw_order(order::GRID),
             ),
         )?;
-        self.check(self.rec.log_static("legend/colour_bar", &legend.bar(self.field.signed())))?;
+        self.check(
+            self.rec
+                .log_static("legend/colour_bar", &legend.bar(self.field.signed())),
+        )?;
         self.log_conditions(sim)
     }
 
@@ -1123,7 +1144,23 @@ impl Recorder {
             } else {
                 (rerun::Color::from_rgb(230, 230, 230), 1.5, name.to_string())
             };
-            let curve: Vec<[f32; 2]> = s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
+            // Drawn with the points: at a small-strain deformation scale
+            // other than 1, through the tracking points as drawn.
+            let curve: Vec<[f32; 2]> = if drawn == 1.0 {
+                s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect()
+            } else {
+                let pts = sim.points();
+                b.points
+                    .iter()
+                    .map(|&p| {
+                        let (x, x0) = (pts.x[p], pts.x0[p]);
+                        [
+                            (x0[0] + drawn * (x[0] - x0[0])) as f32,
+                            (x0[1] + drawn * (x[1] - x0[1])) as f32,
+                        ]
+                    })
+                    .collect()
+            };
             self.check(
                 self.rec.log(
                     format!("boundaries/{name}/curve"),
@@ -1134,11 +1171,16 @@ impl Recorder {
                         .with_draw_order(order::BOUNDARY),
                 ),
             )?;
-            let control: Vec<[f32; 2]> = s
-                .segments
-                .iter()
-                .flat_map(|seg| seg.iter().map(|p| [p[0] as f32, p[1] as f32]))
-                .collect();
+            // The control points are the true curve's: none in a scaled
+            // drawing.
+            let control: Vec<[f32; 2]> = if drawn == 1.0 {
+                s.segments
+                    .iter()
+                    .flat_map(|seg| seg.iter().map(|p| [p[0] as f32, p[1] as f32]))
+                    .collect()
+            } else {
+                Vec::new()
+            };
             self.check(
                 self.rec.log(
                     format!("boundaries/{name}/control_points"),
@@ -1161,7 +1203,7 @@ impl Recorder {
         if drawn != 1.0 {
             frame.described = format!("{}; deformation drawn x{drawn:.3e}", frame.described);
         }
-        frame.scale = match self.settings.colour_range {
+        let scale = match self.settings.colour_range {
             crate::model::record::ColourRange::Frame => own,
             crate::model::record::ColourRange::Run => {
                 let run = self.scale.map_or(own, |s| s.widen(own));
@@ -1176,6 +1218,7 @@ impl Recorder {
                 run
             }
         };
+        frame.scale = scale;
     }
 
     /// Small strain: the scale the points' displacements are drawn at
@@ -1233,17 +1276,23 @@ impl Recorder {
     fn recolour_frames(&mut self) -> Result<(), RecordError> {
         let Some(run) = self.scale else { return Ok(()) };
         let mut colors = Vec::new();
-        for f in std::mem::take(&mut self.recolour).into_iter().filter(|f| f.scale != run) {
+        for f in std::mem::take(&mut self.recolour)
+            .into_iter()
+            .filter(|f| f.scale != run)
+        {
             self.rec.set_time_sequence("step", f.step);
             if let Some(t) = f.time {
                 self.rec.set_duration_secs("time", t);
             }
             colours_of(&run, &f.values, &mut colors);
-            self.check(
-                self.rec
-                    .log("points", &rerun::Points2D::update_fields().with_colors(colors.iter().copied())),
-            )?;
-            self.check(self.rec.log("legend/range", &self.legend.range(&run, &f.described)))?;
+            self.check(self.rec.log(
+                "points",
+                &rerun::Points2D::update_fields().with_colors(colors.iter().copied()),
+            ))?;
+            self.check(self.rec.log(
+                "legend/range",
+                &self.legend.range(&run, &f.described, run.beyond(&f.values)),
+            ))?;
             self.check(self.rec.log("legend/ticks", &self.legend.ticks(&run)))?;
         }
         self.rec.reset_time();
@@ -1286,7 +1335,9 @@ impl Recorder {
     /// a stop at the round-off floor are logged with the solver's metrics).
     fn log_warnings(&self, report: &StepReport) -> Result<(), RecordError> {
         let force = self.units.of(crate::units::Quantity::Force);
-        for b in report.boundaries.iter().filter(|b| b.lost > 0.0) {
+        // Round-off (1e-16 of the load) is not a loss.
+        let lost = |b: &&crate::boundary::BoundaryReport| b.lost > 1e-9 * b.resultant[0].hypot(b.resultant[1]);
+        for b in report.boundaries.iter().filter(lost) {
             self.event(
                 &format!(
                     "step {}: boundary `{}` LOST {:.3e} {force} of its traction on inactive nodes",

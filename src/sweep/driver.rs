@@ -190,7 +190,12 @@ pub fn finish(folder: &Folder, title: &str) -> Result<String, String> {
     for c in charts {
         let _ = writeln!(s, "chart: {}", c.display());
     }
-    let _ = writeln!(s, "recording: {}  (replay: rerun {})", rrd.display(), rrd.display());
+    let _ = writeln!(
+        s,
+        "recording: {}  (replay: mpmlab replay {})",
+        rrd.display(),
+        rrd.display()
+    );
     Ok(s)
 }
 

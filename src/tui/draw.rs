@@ -1111,7 +1111,12 @@ fn probe_line(p: &crate::probe::ProbeValue, u: Units) -> String {
         u.of(Quantity::Length)
     );
     if let Some(v) = p.v {
-        s.push_str(&format!("  v ({:.3e}, {:.3e}) {}", v[0], v[1], u.of(Quantity::Velocity)));
+        s.push_str(&format!(
+            "  v ({:.3e}, {:.3e}) {}",
+            v[0],
+            v[1],
+            u.of(Quantity::Velocity)
+        ));
     }
     if let Some(t) = p.stress {
         s.push_str(&format!(

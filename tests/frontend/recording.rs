@@ -580,7 +580,15 @@ fn the_scene_is_drawn_with_physical_y_up() {
             flipped.insert(c.entity_path().to_string(), s[0]);
         }
     }
-    for root in ["/points", "/grid", "/boundaries", "/ibm", "/legend", "/loads", "/probes"] {
+    for root in [
+        "/points",
+        "/grid",
+        "/boundaries",
+        "/ibm",
+        "/legend",
+        "/loads",
+        "/probes",
+    ] {
         assert_eq!(flipped.get(root), Some(&[1.0, -1.0, 1.0]), "{root}: {flipped:?}");
     }
     let positions = rerun::Points2D::descriptor_positions().component;
@@ -704,12 +712,15 @@ fn the_colour_bar_names_the_field_its_unit_and_range() {
     // the frame's own range.
     let m = lo.abs().max(hi.abs());
     let want = vec![format!(
-        "sigma_yy (Pa): this frame {lo:.3e} .. {hi:.3e}; colours {:.3e} .. {m:.3e} (0 grey)",
+        "sigma_yy (Pa): colours {:.3e} .. {m:.3e} (0 grey)\nthis frame {lo:.3e} .. {hi:.3e}",
         -m
     )];
     assert!(shown.contains(&want), "{shown:?}");
     // The initial state (zero stress) is one colour, grey, on the run's scale.
-    let initial = vec![format!("sigma_yy (Pa): this frame uniform 0.0000e0 ± 0.0e0; colours {:.3e} .. {m:.3e} (0 grey)", -m)];
+    let initial = vec![format!(
+        "sigma_yy (Pa): colours {:.3e} .. {m:.3e} (0 grey)\nthis frame uniform 0.0000e0 ± 0.0e0",
+        -m
+    )];
     assert!(shown.contains(&initial), "{shown:?}");
     // Five ticks under the bar, from -m through 0 to m.
     let ticks: Vec<String> = chunks
@@ -722,7 +733,10 @@ fn the_colour_bar_names_the_field_its_unit_and_range() {
         })
         .last()
         .unwrap();
-    let want: Vec<String> = [-m, -0.5 * m, 0.0, 0.5 * m, m].iter().map(|v| format!("{v:.2e}")).collect();
+    let want: Vec<String> = [-m, -0.5 * m, 0.0, 0.5 * m, m]
+        .iter()
+        .map(|v| format!("{v:.2e}"))
+        .collect();
     assert_eq!(ticks, want);
 }
 
@@ -1376,4 +1390,98 @@ fn a_message_that_spoils_the_index_ends_the_repair_there() {
     );
     assert!(std::fs::read(&out).unwrap().starts_with(b"RRF"));
     let _ = std::fs::remove_file(&out);
+}
+
+/// The labels of an entity's Points2D, LineStrips2D or Arrows2D, over the
+/// whole recording.
+fn labels_of(chunks: &[rerun::log::Chunk], path: &str) -> Vec<String> {
+    let labels = rerun::Points2D::descriptor_labels().component;
+    let strips = rerun::LineStrips2D::descriptor_labels().component;
+    let arrows = rerun::Arrows2D::descriptor_labels().component;
+    chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == path)
+        .flat_map(|c| {
+            [labels, strips, arrows]
+                .into_iter()
+                .flat_map(|d| {
+                    c.iter_slices::<String>(d)
+                        .flat_map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                        .collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// The texts of the `events` log.
+fn event_texts(chunks: &[rerun::log::Chunk]) -> Vec<String> {
+    let text = rerun::TextLog::descriptor_text().component;
+    chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string() == "/events")
+        .flat_map(|c| {
+            c.iter_slices::<String>(text)
+                .flat_map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+#[test]
+fn conditions_loads_probes_and_warnings_are_drawn_and_named() {
+    // The plate: two grid-line rollers, two probes, and Kirsch traction
+    // lost on inactive nodes (1.4e3 N/m, a warning on the timeline).
+    let (chunks, _, _) = record_steps("plate-hole-neumann", 1);
+    let c0 = labels_of(&chunks, "/grid/conditions/0");
+    assert!(c0.iter().any(|l| l.starts_with("roller x = 0: u_x = 0")), "{c0:?}");
+    let c1 = labels_of(&chunks, "/grid/conditions/1");
+    assert!(c1.iter().any(|l| l.starts_with("roller y = 0: u_y = 0")), "{c1:?}");
+    let probes = labels_of(&chunks, "/probes");
+    for p in ["probe hole_top", "probe hole_side"] {
+        assert!(probes.iter().any(|l| l == p), "{probes:?}");
+    }
+    let events = event_texts(&chunks);
+    assert!(
+        events
+            .iter()
+            .any(|e| e.contains("boundary `outer` LOST") && e.contains("inactive nodes")),
+        "{events:?}"
+    );
+    // Implicit rollers are named rollers.
+    let (chunks, _, _) = record_steps("square-traction-ibm-45", 1);
+    let left = labels_of(&chunks, "/ibm/left/line");
+    assert!(left.iter().any(|l| l == "left (implicit roller)"), "{left:?}");
+    // Gravity as a labelled arrow.
+    let (chunks, _, _) = record_steps("column-small-strain", 1);
+    let g = labels_of(&chunks, "/loads/gravity");
+    assert!(g.iter().any(|l| l.starts_with("gravity (0, -10)")), "{g:?}");
+}
+
+#[test]
+fn a_singular_condition_number_is_an_event_not_a_number() {
+    // Without ghost the beam's stiffness is singular to working precision
+    // at some steps (the condition estimate above 1/eps): those are
+    // events; every number logged is at most 1/eps.
+    let (chunks, _, _) = record_steps("elastic-beam-ghost", 20);
+    let events = event_texts(&chunks);
+    assert!(
+        events
+            .iter()
+            .any(|e| e.contains("the stiffness without ghost is singular to working precision")),
+        "{events:?}"
+    );
+    let scalars = rerun::Scalars::descriptor_scalars().component;
+    for c in chunks
+        .iter()
+        .filter(|c| c.entity_path().to_string().starts_with("/metrics/condition/"))
+    {
+        for v in c.iter_slices::<f64>(scalars) {
+            assert!(
+                v.iter().all(|x| x.is_finite() && *x <= 1.0 / f64::EPSILON),
+                "{}: {v:?}",
+                c.entity_path()
+            );
+        }
+    }
 }

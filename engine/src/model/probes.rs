@@ -59,7 +59,10 @@ pub(super) fn build(
             }
         };
         if spec.point.is_some() && spec.at.is_none() {
-            return Err(FieldError::new(f("point"), "`point` chooses what answers at a position: give `at`"));
+            return Err(FieldError::new(
+                f("point"),
+                "`point` chooses what answers at a position: give `at`",
+            ));
         }
         probes.push(Probe {
             name: name.to_string(),
@@ -106,14 +109,27 @@ fn position_target(
     // The body whose region holds `at`; a position on a region's edge
     // (a beam's tip, a corner) is held by the body on either side.
     let e = 1e-6 * g.h;
-    let near = [[0.0, 0.0], [e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e], [e, e], [-e, e], [e, -e], [-e, -e]];
+    let near = [
+        [0.0, 0.0],
+        [e, 0.0],
+        [-e, 0.0],
+        [0.0, e],
+        [0.0, -e],
+        [e, e],
+        [-e, e],
+        [e, -e],
+        [-e, -e],
+    ];
     let body = regions
         .iter()
         .position(|r| near.iter().any(|d| r.contains([at[0] + d[0], at[1] + d[1]])))
         .ok_or_else(|| {
             FieldError::new(
                 field(),
-                format!("[{}, {}] is outside every body: a probe reads the material at a position", at[0], at[1]),
+                format!(
+                    "[{}, {}] is outside every body: a probe reads the material at a position",
+                    at[0], at[1]
+                ),
             )
         })?;
     let mine = (0..points.len()).filter(|&p| points.body[p] == body && points.vol0[p] > 0.0);
@@ -123,7 +139,10 @@ fn position_target(
             .ok_or_else(|| {
                 FieldError::new(
                     field(),
-                    format!("no material point of body {body} lies within 1.5 cells of [{}, {}]", at[0], at[1]),
+                    format!(
+                        "no material point of body {body} lies within 1.5 cells of [{}, {}]",
+                        at[0], at[1]
+                    ),
                 )
             }),
         ProbeRead::Nearest => {

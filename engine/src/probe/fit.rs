@@ -139,7 +139,11 @@ mod tests {
         let mut v = Vec::new();
         for i in 0..12 {
             for j in 0..12 {
-                v.push((v.len(), [-3.0 + 0.25 + 0.5 * i as f64, -3.0 + 0.25 + 0.5 * j as f64], 0.25));
+                v.push((
+                    v.len(),
+                    [-3.0 + 0.25 + 0.5 * i as f64, -3.0 + 0.25 + 0.5 * j as f64],
+                    0.25,
+                ));
             }
         }
         v

@@ -43,7 +43,11 @@ fn cooks_membrane_converges_to_the_reference_in_plane_stress() {
     // corners are singular): halving h at least halves the error, to
     // under 1% at h = 1 (measured: mid 0.60% -> 0.18%, corner 1.5% -> 0.67%).
     for k in 0..2 {
-        let (e2, e1) = if k == 0 { (err[0].0, err[1].0) } else { (err[0].1, err[1].1) };
+        let (e2, e1) = if k == 0 {
+            (err[0].0, err[1].0)
+        } else {
+            (err[0].1, err[1].1)
+        };
         assert!(e1 < 0.6 * e2 && e1 < 0.01, "{err:?}");
     }
 }
@@ -106,7 +110,11 @@ fn newton_stops_at_the_round_off_floor_and_reports_it() {
         })
     };
     let r = run_all(&mut finite(30));
-    let a = r.solver.as_ref().and_then(|s| s.attainable).expect("stopped at the floor");
+    let a = r
+        .solver
+        .as_ref()
+        .and_then(|s| s.attainable)
+        .expect("stopped at the floor");
     println!("{a}; residuals {:?}", r.residuals);
     assert!(a.residual > a.tolerance && a.residual <= a.floor, "{a:?}");
     assert!(a.correction <= f64::EPSILON.sqrt() && a.condition > 1e9, "{a:?}");

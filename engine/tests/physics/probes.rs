@@ -27,7 +27,11 @@ fn value<'a>(r: &'a StepReport, name: &str) -> &'a mpmlab_engine::probe::ProbeVa
 fn a_field_probe_reads_a_linear_field_exactly_anywhere() {
     let at = [[1.0, 1.0], [0.37, 1.91], [2.25, 0.0], [1.6, 0.123]];
     let mut sim = sim_with("patch-compression", |s| {
-        s.probes = at.iter().enumerate().map(|(k, &x)| probe(&format!("f{k}"), x, None)).collect();
+        s.probes = at
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| probe(&format!("f{k}"), x, None))
+            .collect();
         s.probes.push(probe("n0", at[1], Some(ProbeRead::Nearest)));
     });
     let r = run_all(&mut sim);
@@ -39,7 +43,12 @@ fn a_field_probe_reads_a_linear_field_exactly_anywhere() {
         let (s, u) = exact.fields(x, r.load_factor);
         let p = value(&r, &format!("f{k}"));
         for c in 0..2 {
-            assert!((p.u[c] - u[c]).abs() < 1e-12 * 2e-3, "f{k} u{c}: {} vs {}", p.u[c], u[c]);
+            assert!(
+                (p.u[c] - u[c]).abs() < 1e-12 * 2e-3,
+                "f{k} u{c}: {} vs {}",
+                p.u[c],
+                u[c]
+            );
         }
         let ps = p.stress.unwrap();
         for c in 0..3 {
@@ -141,6 +150,9 @@ fn one_configuration_splits_one_linear_solution() {
     let mut s = mpmlab_engine::scene::Scene::parse(&text, "footing").unwrap();
     s.analysis.kind = mpmlab_engine::scene::AnalysisKind::QuasiStaticLinear;
     s.analysis.update_points = false;
-    let e = mpmlab_engine::Model::build(&s, &text, "footing").err().unwrap().to_string();
+    let e = mpmlab_engine::Model::build(&s, &text, "footing")
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("update_points"), "{e}");
 }
