@@ -1105,6 +1105,14 @@ impl Recorder {
             self.rec.set_duration_secs("time", t);
         }
         self.log_loads_and_probes(sim, drawn)?;
+        self.log_boundaries(sim, drawn)
+    }
+
+    /// The implicit boundaries (labelled with name and kind) and the cells
+    /// they cut; the B-spline boundaries (red and labelled when they carry
+    /// a traction) with their control points, drawn with the points at
+    /// deformation scale `drawn`.
+    fn log_boundaries(&self, sim: &Simulation, drawn: f64) -> Result<(), RecordError> {
         let g = &sim.model().grid;
         for b in &sim.ibm_boundaries() {
             let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
