@@ -624,6 +624,10 @@ pub struct Recorder {
     legend: ColourBar,
     scale: Option<colormap::Scale>,
     recolour: Vec<Recolour>,
+    /// Values kept in `recolour`, and the first frame not kept (over
+    /// [`RECOLOUR_BUDGET`]).
+    recolour_values: usize,
+    recolour_from: Option<i64>,
     /// Small strain: the deformation scale the points are drawn with,
     /// once known.
     deformation: Option<f64>,
@@ -631,14 +635,21 @@ pub struct Recorder {
     units: crate::units::Units,
 }
 
-/// A frame logged with a colour scale the run later widened.
+/// A frame logged with a colour scale the run may later widen: its values
+/// (as f32: a colour needs no more) to colour it again.
 struct Recolour {
     step: i64,
     time: Option<f64>,
     scale: colormap::Scale,
-    values: Vec<f64>,
+    values: Vec<f32>,
     described: String,
 }
+
+/// The most colour values a recording keeps to colour its frames again
+/// with the run's final scale (64 MB; eight times the default point-frame
+/// budget). Frames past it keep the scale they were drawn with, which an
+/// event names.
+const RECOLOUR_BUDGET: usize = 16_000_000;
 
 /// The default longest time between flushes of a recording into its file:
 /// a killed run loses at most the steps of the last half second (and every
@@ -778,6 +789,8 @@ impl Recorder {
             legend: legend.clone(),
             scale: None,
             recolour: Vec::new(),
+            recolour_values: 0,
+            recolour_from: None,
             deformation: None,
             units: sim.model().units,
         };
@@ -1216,13 +1229,19 @@ impl Recorder {
             crate::model::record::ColourRange::Run => {
                 let run = self.scale.map_or(own, |s| s.widen(own));
                 self.scale = Some(run);
-                self.recolour.push(Recolour {
-                    step: frame.step,
-                    time: frame.time,
-                    scale: run,
-                    values: frame.colour.clone(),
-                    described: frame.described.clone(),
-                });
+                let n = frame.colour.len();
+                if self.recolour_from.is_none() && self.recolour_values + n <= RECOLOUR_BUDGET {
+                    self.recolour_values += n;
+                    self.recolour.push(Recolour {
+                        step: frame.step,
+                        time: frame.time,
+                        scale: run,
+                        values: frame.colour.iter().map(|&v| v as f32).collect(),
+                        described: frame.described.clone(),
+                    });
+                } else {
+                    self.recolour_from.get_or_insert(frame.step);
+                }
                 run
             }
         };
@@ -1283,6 +1302,15 @@ impl Recorder {
     /// narrower scale than the run's final one again with it.
     fn recolour_frames(&mut self) -> Result<(), RecordError> {
         let Some(run) = self.scale else { return Ok(()) };
+        if let Some(step) = self.recolour_from {
+            self.event(
+                &format!(
+                    "the frames from step {step} on keep the colour range they were drawn with \
+                     (the run's frames hold more than {RECOLOUR_BUDGET} values to colour again)"
+                ),
+                "WARN",
+            )?;
+        }
         let mut colors = Vec::new();
         for f in std::mem::take(&mut self.recolour)
             .into_iter()
@@ -1292,14 +1320,15 @@ impl Recorder {
             if let Some(t) = f.time {
                 self.rec.set_duration_secs("time", t);
             }
-            colours_of(&run, &f.values, &mut colors);
+            let values: Vec<f64> = f.values.iter().map(|&v| v as f64).collect();
+            colours_of(&run, &values, &mut colors);
             self.check(self.rec.log(
                 "points",
                 &rerun::Points2D::update_fields().with_colors(colors.iter().copied()),
             ))?;
             self.check(self.rec.log(
                 "legend/range",
-                &self.legend.range(&run, &f.described, run.beyond(&f.values)),
+                &self.legend.range(&run, &f.described, run.beyond(&values)),
             ))?;
             self.check(self.rec.log("legend/ticks", &self.legend.ticks(&run)))?;
         }
