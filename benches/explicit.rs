@@ -275,6 +275,10 @@ fn time_reference(steps: usize) -> (usize, f64) {
 /// The throughput table: mpmlab (lumped, stabilised) against the minimal
 /// kernel, point-steps per second and ratios from one run.
 fn throughput() {
+    println!(
+        "machine: {} cores available (ratios measured in this one run)",
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
     let steps = std::env::var("EXPLICIT_BENCH_STEPS")
         .ok()
         .and_then(|s| s.parse().ok())

@@ -239,6 +239,11 @@ fn main() {
         pairs.push((runs.len() - 2, runs.len() - 1));
     }
 
+    // Ratios are of one run on this machine: say what it has.
+    println!(
+        "machine: {} cores available (ratios measured in this one run)",
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
     println!(
         "{:<16} {:>9} {:>5} {:>5} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>8}",
         "run",
