@@ -50,21 +50,47 @@ pub(crate) fn linear_step(sim: &mut Simulation) -> Result<StepReport, StepFailur
 /// show the deformed body (where the grid need not reach). On a failure
 /// the state is as it was.
 fn on_the_starting_configuration(sim: &mut Simulation) -> Result<StepReport, StepFailure> {
+    let step = sim.state.step + 1;
+    let copy = |v: &[P2], what: &str| -> Result<Vec<P2>, StepFailure> {
+        let mut c = Vec::new();
+        c.try_reserve_exact(v.len())
+            .map_err(|_| linalg::FactorError::allocation(what, v.len().saturating_mul(16)).at_step(step))?;
+        c.extend_from_slice(v);
+        Ok(c)
+    };
+    let pts = &sim.state.points;
+    let start = copy(&pts.x0, "the points' starting positions")?;
+    let lp = copy(&pts.lp, "the points' domains")?;
+    let mut vol = Vec::new();
+    vol.try_reserve_exact(pts.vol.len())
+        .map_err(|_| linalg::FactorError::allocation("the points' volumes", pts.vol.len() * 8).at_step(step))?;
+    vol.extend_from_slice(&pts.vol);
+    let moved = std::mem::replace(&mut sim.state.points.x, start);
+    // A panic in the step (caught above the driver) must not leave the
+    // points at their starting positions.
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| incremental_step(sim)));
     let pts = &mut sim.state.points;
-    let moved = std::mem::replace(&mut pts.x, pts.x0.clone());
-    let (vol, lp) = (pts.vol.clone(), pts.lp.clone());
-    let result = incremental_step(sim);
-    let pts = &mut sim.state.points;
-    if result.is_ok() {
-        for (p, x) in pts.x.iter_mut().enumerate() {
-            let x0 = pts.x0[p];
-            *x = [moved[p][0] + (x[0] - x0[0]), moved[p][1] + (x[1] - x0[1])];
+    match result {
+        Ok(Ok(mut report)) => {
+            for (p, x) in pts.x.iter_mut().enumerate() {
+                let x0 = pts.x0[p];
+                *x = [moved[p][0] + (x[0] - x0[0]), moved[p][1] + (x[1] - x0[1])];
+            }
+            (pts.vol, pts.lp) = (vol, lp);
+            // The errors against an exact solution read the accumulated
+            // displacements, not the step's.
+            report.errors = sim.exact_errors(report.load_factor);
+            Ok(report)
         }
-        (pts.vol, pts.lp) = (vol, lp);
-    } else {
-        pts.x = moved;
+        Ok(Err(e)) => {
+            pts.x = moved;
+            Err(e)
+        }
+        Err(panic) => {
+            pts.x = moved;
+            std::panic::resume_unwind(panic)
+        }
     }
-    result
 }
 
 /// One quasi-static small-strain load step on the points as they are:
@@ -226,20 +252,24 @@ fn assemble(setup: &Setup) -> Result<System, StepFailure> {
     let (mut forces, boundaries) = sim.nodal_forces(map, frame.step, frame.lambda1)?;
     // Points inside a band (C (18)) and in a B-bar patch work through
     // their own operator, not B: correct f_int by (op - B)^T s V.
+    // A patch's points also correct the supports' reaction (the band's
+    // points, as before B-bar, only the free dofs).
     for p in (0..pts.len()).filter(|&p| pts.vol[p] > 0.0) {
         let st = map.stencils.get(p);
-        let op = match (&frame.bbar, &frame.ibm) {
-            (Some(bb), _) if bb.op(map, p).is_some() => bb.op(map, p),
-            (_, Some(s)) if s.in_band[p] => Some(s.point_b(st, pts.x[p]).0),
-            _ => None,
+        let (op, patch) = match (frame.bbar.as_ref().and_then(|b| b.op(map, p)), &frame.ibm) {
+            (Some(op), _) => (op, true),
+            (None, Some(s)) if s.in_band[p] => (s.point_b(st, pts.x[p]).0, false),
+            _ => continue,
         };
-        let Some(op) = op else { continue };
         let plain = ibm::plain_b(st);
         let sig = pts.stress[p];
         for (k, (n, _, _)) in st.iter().enumerate() {
             for c in 0..2 {
-                if let Dof::Free(i) = map.dofs.node_dof[n][c] {
-                    forces.int[i] += pts.vol[p] * (0..3).map(|r| (op[k][r][c] - plain[k][r][c]) * sig[r]).sum::<f64>();
+                let f = || pts.vol[p] * (0..3).map(|r| (op[k][r][c] - plain[k][r][c]) * sig[r]).sum::<f64>();
+                match map.dofs.node_dof[n][c] {
+                    Dof::Free(i) => forces.int[i] += f(),
+                    Dof::Fixed(i) if patch => forces.int_fixed[i] += f(),
+                    _ => {}
                 }
             }
         }

@@ -396,12 +396,17 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
     }
 }
 
+/// The largest relative residual ever taken as converged at the
+/// round-off floor: a floor above it (a tangent with `kappa` past 5e9)
+/// means too little accuracy to call a solution, and the step fails.
+const MAX_ATTAINABLE: f64 = 1e-5;
+
 /// Whether Newton has converged as far as arithmetic allows
 /// ([`Attainable`]): the relative residual (the last of `residuals`) has
 /// stalled (above half the one before); the last correction changed the
 /// unknowns by at most `sqrt(eps)` of their size (the classic step test
 /// of nonlinear solvers: below it a further step only moves round-off);
-/// and the residual is within `10 kappa eps`, the floor the last
+/// and the residual is within `10 kappa eps` (and [`MAX_ATTAINABLE`]), the floor the last
 /// tangent's 1-norm condition estimate `kappa` predicts (computed once per
 /// increment, when first asked; the factor 10 covers the estimate's
 /// looseness and the few round-off-sized terms each residual sums), with
@@ -423,7 +428,7 @@ fn at_the_floor(
     let (k, f) = last.as_mut()?;
     let kappa = *kappa.get_or_insert_with(|| condition_with(setup.matrix(k), setup.symmetry(), f).value);
     let floor = 10.0 * kappa * f64::EPSILON;
-    (kappa < 1.0 / f64::EPSILON && *rel <= floor).then_some(Attainable {
+    (kappa < 1.0 / f64::EPSILON && *rel <= floor.min(MAX_ATTAINABLE)).then_some(Attainable {
         residual: *rel,
         floor,
         condition: kappa,

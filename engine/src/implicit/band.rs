@@ -156,7 +156,11 @@ fn small_strain_reports(
     let mut residual0 = vec![[0.0; 2]; grid.num_nodes()];
     for p in (0..new.len()).filter(|&p| old.vol[p] > 0.0) {
         let st = map.stencils.get(p);
-        let (bb, _) = s.point_b(st, old.x[p]);
+        // A B-bar patch's point balances with its own operator.
+        let bb = match frame.bbar.as_ref().and_then(|b| b.op(map, p)) {
+            Some(op) => op,
+            None => s.point_b(st, old.x[p]).0,
+        };
         for (k, (n, _, _)) in st.iter().enumerate() {
             for c in 0..2 {
                 let f = |sig: [f64; 3]| (0..3).map(|r| bb[k][r][c] * sig[r]).sum::<f64>() * old.vol[p];

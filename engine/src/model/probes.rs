@@ -140,8 +140,8 @@ fn position_target(
                 FieldError::new(
                     field(),
                     format!(
-                        "no material point of body {body} lies within 1.5 cells of [{}, {}]",
-                        at[0], at[1]
+                        "no material point of body `{}` lies within 1.5 cells of [{}, {}]",
+                        scene.bodies[body].name, at[0], at[1]
                     ),
                 )
             }),
@@ -149,7 +149,12 @@ fn position_target(
             let d2 = |p: &usize| (points.x0[*p][0] - at[0]).powi(2) + (points.x0[*p][1] - at[1]).powi(2);
             mine.min_by(|a, b| d2(a).total_cmp(&d2(b)))
                 .map(ProbeTarget::Point)
-                .ok_or_else(|| FieldError::new(field(), format!("body {body} has no material points")))
+                .ok_or_else(|| {
+                    FieldError::new(
+                        field(),
+                        format!("body `{}` has no material points", scene.bodies[body].name),
+                    )
+                })
         }
     }
 }

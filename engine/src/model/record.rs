@@ -52,7 +52,7 @@ pub use crate::scene::ColourRange;
 /// more than its radius: drawn true, the hole collapses to a slit).
 pub fn deformation_scale(u_max: f64, lambda: f64, size: f64) -> f64 {
     let full = u_max / lambda.max(f64::MIN_POSITIVE);
-    if full > 0.1 * size && full.is_finite() {
+    if size > 0.0 && full > 0.1 * size && full.is_finite() {
         0.1 * size / full
     } else {
         1.0

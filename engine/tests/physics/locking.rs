@@ -76,6 +76,29 @@ fn b_bar_removes_volumetric_locking_near_incompressibility() {
     }
 }
 
+/// On one configuration, four load steps split the one-step solution: from
+/// the second step on the internal force of the stresses so far is B-bar's
+/// (a wrong sign or factor in its correction would show here), and so are
+/// the supports' reactions, whose work must balance the strain energy.
+#[test]
+fn b_bar_over_several_steps_splits_the_one_step_solution() {
+    let run = |steps: usize| {
+        let mut sim = sim_with("cook-membrane-incompressible", |s| {
+            s.grid.h = 2.0;
+            s.analysis.load_steps = steps;
+        });
+        let r = run_all(&mut sim);
+        (uy(&r, "corner"), r.energy.strain, r.energy.external_work)
+    };
+    let (one, four) = (run(1), run(4));
+    // The stiffness' condition number is ~1e9 here (nu = 0.4999): 1e-6
+    // relative leaves room for eps kappa.
+    assert!((four.0 - one.0).abs() < 1e-6 * one.0, "{four:?} vs {one:?}");
+    // Strain energy against the work of the loads (trapezoidal, exact for
+    // a linear path): the supports are fixed, so they do no work.
+    assert!((four.1 - four.2).abs() < 1e-6 * four.2, "{four:?}");
+}
+
 /// B-bar changes only the volumetric part within a patch: a uniform
 /// strain passes the patch test unchanged.
 #[test]

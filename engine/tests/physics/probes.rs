@@ -156,3 +156,21 @@ fn one_configuration_splits_one_linear_solution() {
         .to_string();
     assert!(e.contains("update_points"), "{e}");
 }
+
+/// On one configuration the errors against an exact solution read the
+/// accumulated displacement: the patch test stays exact over several steps
+/// (were they read before the step's motion is added to the earlier ones,
+/// the second step's displacement error would be half the displacement).
+#[test]
+fn one_configuration_errors_read_the_whole_displacement() {
+    let mut sim = sim_with("patch-compression", |s| {
+        s.analysis.load_steps = 3;
+        s.analysis.update_points = false;
+    });
+    let r = run_all(&mut sim);
+    for e in &r.errors {
+        // Round-off of the patch test, as in one step.
+        assert!(e.value < 1e-10, "{}: {}", e.name, e.value);
+    }
+    assert!(!r.errors.is_empty());
+}
