@@ -67,7 +67,9 @@
 //!
 //! The engine knows nothing of this module: it reads reports and state.
 
+mod drawing;
 pub mod layout;
+mod legend;
 pub mod repair;
 mod sink;
 pub mod sweep;
@@ -78,6 +80,7 @@ use crate::format::human_bytes;
 use crate::model::record::{Plan, RecordSettings};
 use crate::simulation::{Simulation, StepFailure, StepReport};
 use layout::{order, titled, Contents, Quantity};
+use legend::{colours_of, ColourBar, Recolour};
 use rerun::{RecordingStream, RecordingStreamBuilder};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, Receiver, SyncSender};
@@ -376,108 +379,6 @@ fn write_frame(
     Ok(())
 }
 
-/// The points' colours on `scale`.
-fn colours_of(scale: &colormap::Scale, values: &[f64], out: &mut Vec<rerun::Color>) {
-    out.clear();
-    out.extend(values.iter().map(|&v| {
-        let [r, g, b] = scale.colour(v);
-        rerun::Color::from_rgb(r, g, b)
-    }));
-}
-
-/// A colour bar under the grid: the colour map as a row of segments
-/// (static, 1.5 cells below the grid) with five labelled ticks, and per
-/// frame a two-line label under them naming the field, its unit, the
-/// colours' range and the frame's values (centred, so that the view's
-/// bounds, fitted to the data, do not cut it).
-#[derive(Clone)]
-struct ColourBar {
-    /// Field title with its unit (`sigma_yy (Pa)`).
-    title: String,
-    x: [f32; 2],
-    /// The bar's height and the label's anchor (m).
-    y: f32,
-    label_y: f32,
-    width: f32,
-}
-
-impl ColourBar {
-    /// Segments of the colour bar.
-    const SEGMENTS: usize = 32;
-
-    fn new(g: &crate::grid::Grid, title: String) -> ColourBar {
-        let max = g.max();
-        ColourBar {
-            title,
-            x: [g.origin[0] as f32, max[0] as f32],
-            y: (g.origin[1] - 1.5 * g.h) as f32,
-            label_y: (g.origin[1] - 3.5 * g.h) as f32,
-            width: (0.5 * g.h) as f32,
-        }
-    }
-
-    /// The bar of a signed field's map (diverging) or a magnitude's.
-    fn bar(&self, signed: bool) -> rerun::LineStrips2D {
-        let n = Self::SEGMENTS;
-        let dx = (self.x[1] - self.x[0]) / n as f32;
-        let strips = (0..n).map(|k| {
-            let x = self.x[0] + k as f32 * dx;
-            [[x, self.y], [x + dx, self.y]]
-        });
-        let unit = colormap::Scale {
-            signed,
-            lo: 0.0,
-            hi: 1.0,
-        };
-        let colours = (0..n).map(|k| {
-            let [r, g, b] = unit.colour((k as f64 + 0.5) / n as f64);
-            rerun::Color::from_rgb(r, g, b)
-        });
-        rerun::LineStrips2D::new(strips)
-            .with_colors(colours)
-            .with_radii([rerun::Radius::new_scene_units(0.5 * self.width)])
-            .with_draw_order(order::LEGEND)
-    }
-
-    /// The label: the field, what the frame's values are (their range,
-    /// or `uniform V ± S`), the scale the colours span and how many points
-    /// lie beyond it (drawn at its ends, [`colormap::OUTLIERS`]).
-    fn range(&self, scale: &colormap::Scale, described: &str, beyond: usize) -> rerun::Points2D {
-        // Two lines, each narrower than a small grid's view.
-        let label = format!(
-            "{}: colours {:.3e} .. {:.3e}{}{}\nthis frame {described}",
-            self.title,
-            scale.lo,
-            scale.hi,
-            if scale.signed { " (0 grey)" } else { "" },
-            match beyond {
-                0 => String::new(),
-                n => format!(", {n} points beyond (at the ends)"),
-            }
-        );
-        rerun::Points2D::new([[0.5 * (self.x[0] + self.x[1]), self.label_y]])
-            .with_labels([label])
-            .with_colors([rerun::Color::from_rgb(230, 230, 230)])
-            .with_radii([rerun::Radius::new_ui_points(0.5)])
-            .with_draw_order(order::LEGEND)
-    }
-}
-
-impl ColourBar {
-    /// Ticks under the bar: five labelled marks from its left end (`lo`)
-    /// to its right end (`hi`), zero in the middle of a signed scale.
-    fn ticks(&self, scale: &colormap::Scale) -> rerun::Points2D {
-        let values = scale.ticks(5);
-        let n = values.len() as f32 - 1.0;
-        let at = (0..values.len()).map(|k| [self.x[0] + (self.x[1] - self.x[0]) * k as f32 / n, self.y]);
-        rerun::Points2D::new(at)
-            .with_labels(values.iter().map(|v| format!("{v:.2e}")))
-            .with_colors([rerun::Color::from_rgb(230, 230, 230)])
-            .with_radii([rerun::Radius::new_ui_points(2.0)])
-            .with_draw_order(order::LEGEND + 1.0)
-    }
-}
-
 /// What a finished recording holds and its size.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RecordingSize {
@@ -625,7 +526,7 @@ pub struct Recorder {
     scale: Option<colormap::Scale>,
     recolour: Vec<Recolour>,
     /// Values kept in `recolour`, and the first frame not kept (over
-    /// [`RECOLOUR_BUDGET`]).
+    /// the budget, `legend::RECOLOUR_BUDGET`).
     recolour_values: usize,
     recolour_from: Option<i64>,
     /// Small strain: the deformation scale the points are drawn with,
@@ -634,22 +535,6 @@ pub struct Recorder {
     /// The scene's unit system (events' units).
     units: crate::units::Units,
 }
-
-/// A frame logged with a colour scale the run may later widen: its values
-/// (as f32: a colour needs no more) to colour it again.
-struct Recolour {
-    step: i64,
-    time: Option<f64>,
-    scale: colormap::Scale,
-    values: Vec<f32>,
-    described: String,
-}
-
-/// The most colour values a recording keeps to colour its frames again
-/// with the run's final scale (64 MB; eight times the default point-frame
-/// budget). Frames past it keep the scale they were drawn with, which an
-/// event names.
-const RECOLOUR_BUDGET: usize = 16_000_000;
 
 /// The default longest time between flushes of a recording into its file:
 /// a killed run loses at most the steps of the last half second (and every
@@ -962,125 +847,6 @@ impl Recorder {
         self.log_conditions(sim)
     }
 
-    /// The grid-line conditions (static: grid lines do not move), each
-    /// labelled with its kind and prescribed value, and gravity as an
-    /// arrow at the grid's top-left corner.
-    fn log_conditions(&self, sim: &Simulation) -> Result<(), RecordError> {
-        use crate::model::GridTarget;
-        let m = sim.model();
-        let (g, u) = (&m.grid, m.units);
-        let len = u.of(crate::units::Quantity::Length);
-        let max = g.max();
-        for (k, c) in m.dirichlet.iter().enumerate() {
-            let named: Vec<String> = c
-                .value
-                .iter()
-                .zip(["u_x", "u_y"])
-                .filter_map(|(v, n)| v.map(|v| format!("{n} = {v}")))
-                .collect();
-            let kind = if named.len() == 2 { "fixed" } else { "roller" };
-            let (strip, place) = match c.target {
-                GridTarget::Line { axis: 0, index } => {
-                    let x = g.origin[0] + index as f64 * g.h;
-                    (vec![[x, g.origin[1]], [x, max[1]]], format!("x = {x}"))
-                }
-                GridTarget::Line { index, .. } => {
-                    let y = g.origin[1] + index as f64 * g.h;
-                    (vec![[g.origin[0], y], [max[0], y]], format!("y = {y}"))
-                }
-                GridTarget::Node(n) => {
-                    let x = g.node_position(n);
-                    (vec![x, x], format!("node ({}, {})", x[0], x[1]))
-                }
-            };
-            let label = format!("{kind} {place}: {} {len} (grid line condition)", named.join(", "));
-            let strip: Vec<[f32; 2]> = strip.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
-            self.check(
-                self.rec.log_static(
-                    format!("grid/conditions/{k}"),
-                    &rerun::LineStrips2D::new([strip])
-                        .with_colors([rerun::Color::from_rgb(204, 121, 167)])
-                        .with_radii([rerun::Radius::new_ui_points(2.0)])
-                        .with_labels([label])
-                        .with_draw_order(order::CONDITIONS),
-                ),
-            )?;
-        }
-        if m.gravity != [0.0; 2] {
-            let n = m.gravity[0].hypot(m.gravity[1]);
-            let a = 2.0 * g.h / n;
-            self.check(
-                self.rec.log_static(
-                    "loads/gravity",
-                    &rerun::Arrows2D::from_vectors([[(a * m.gravity[0]) as f32, (a * m.gravity[1]) as f32]])
-                        .with_origins([[(g.origin[0] + g.h) as f32, (max[1] - g.h) as f32]])
-                        .with_labels([format!(
-                            "gravity ({}, {}) {len}/{}^2",
-                            m.gravity[0],
-                            m.gravity[1],
-                            u.of(crate::units::Quantity::Time)
-                        )])
-                        .with_colors([rerun::Color::from_rgb(86, 180, 233)])
-                        .with_draw_order(order::LOADS),
-                ),
-            )?;
-        }
-        Ok(())
-    }
-
-    /// The point loads (arrows two cells long at their points, labelled
-    /// with the force at load factor 1) and the probes at their positions
-    /// (labelled), drawn with the points at deformation scale `s`.
-    fn log_loads_and_probes(&self, sim: &Simulation, s: f64) -> Result<(), RecordError> {
-        let m = sim.model();
-        let pts = sim.points();
-        let drawn = |x: [f64; 2], u: [f64; 2]| [(x[0] + s * u[0]) as f32, (x[1] + s * u[1]) as f32];
-        let force = m.units.of(crate::units::Quantity::Force);
-        for (k, l) in m.point_loads.iter().enumerate() {
-            let n = l.force[0].hypot(l.force[1]);
-            if n == 0.0 {
-                continue;
-            }
-            let a = 2.0 * m.grid.h / n;
-            self.check(
-                self.rec.log(
-                    format!("loads/point/{k}"),
-                    &rerun::Arrows2D::from_vectors([[(a * l.force[0]) as f32, (a * l.force[1]) as f32]])
-                        .with_origins([drawn(pts.x0[l.point], pts.displacement(l.point))])
-                        .with_labels([format!("F ({:.3e}, {:.3e}) {force}", l.force[0], l.force[1])])
-                        .with_colors([rerun::Color::from_rgb(86, 180, 233)])
-                        .with_draw_order(order::LOADS),
-                ),
-            )?;
-        }
-        let mut at = Vec::new();
-        let mut names = Vec::new();
-        for (p, v) in m.probes.iter().zip(sim.probe_values(None)) {
-            let x0 = match p.target {
-                crate::probe::ProbeTarget::Point(q) => pts.x0[q],
-                _ => match p.at {
-                    Some(a) => a,
-                    None => continue,
-                },
-            };
-            at.push(drawn(x0, v.u));
-            names.push(format!("probe {}", p.name));
-        }
-        if !at.is_empty() {
-            self.check(
-                self.rec.log(
-                    "probes",
-                    &rerun::Points2D::new(at)
-                        .with_labels(names)
-                        .with_colors([rerun::Color::from_rgb(240, 228, 66)])
-                        .with_radii([rerun::Radius::new_ui_points(4.0)])
-                        .with_draw_order(order::PROBES),
-                ),
-            )?;
-        }
-        Ok(())
-    }
-
     /// Log the points (with the recorded fields), the active cells and the
     /// boundaries at the simulation's current step, whatever the cadence
     /// (once per step: a second call at the same step does nothing).
@@ -1119,221 +885,6 @@ impl Recorder {
         }
         self.log_loads_and_probes(sim, drawn)?;
         self.log_boundaries(sim, drawn)
-    }
-
-    /// The implicit boundaries (labelled with name and kind) and the cells
-    /// they cut; the B-spline boundaries (red and labelled when they carry
-    /// a traction) with their control points, drawn with the points at
-    /// deformation scale `drawn`.
-    fn log_boundaries(&self, sim: &Simulation, drawn: f64) -> Result<(), RecordError> {
-        let g = &sim.model().grid;
-        for b in &sim.ibm_boundaries() {
-            let line: Vec<[f32; 2]> = b.points.iter().map(|p| [p[0] as f32, p[1] as f32]).collect();
-            self.check(
-                self.rec.log(
-                    format!("ibm/{}/line", b.name),
-                    &rerun::LineStrips2D::new([line])
-                        .with_colors([rerun::Color::from_rgb(40, 200, 220)])
-                        .with_radii([rerun::Radius::new_ui_points(2.5)])
-                        .with_labels([format!(
-                            "{} (implicit {})",
-                            b.name,
-                            match b.kind {
-                                crate::scene::DirichletKind::Roller => "roller",
-                                crate::scene::DirichletKind::Fixed => "fixed",
-                            }
-                        )])
-                        .with_draw_order(order::BOUNDARY),
-                ),
-            )?;
-            let cut: Vec<[[f32; 2]; 5]> = b.cut_cells(g).iter().map(|&c| cell_box(g, c)).collect();
-            self.check(
-                self.rec.log(
-                    format!("ibm/{}/cut_cells", b.name),
-                    &rerun::LineStrips2D::new(cut)
-                        .with_colors([rerun::Color::from_rgb(0, 110, 120)])
-                        .with_radii([rerun::Radius::new_ui_points(1.0)])
-                        .with_draw_order(order::CUT_CELLS),
-                ),
-            )?;
-        }
-        for ((name, spline), b) in sim.boundary_splines().into_iter().zip(&sim.model().boundaries) {
-            let Some(s) = spline else { continue };
-            // A loaded boundary: red, thicker and labelled as loaded.
-            let (color, width, label) = if b.traction.is_some() {
-                (rerun::Color::from_rgb(230, 80, 60), 3.0, format!("{name} (traction)"))
-            } else {
-                (rerun::Color::from_rgb(230, 230, 230), 1.5, name.to_string())
-            };
-            // Drawn with the points: at a small-strain deformation scale
-            // other than 1, through the tracking points as drawn.
-            let curve: Vec<[f32; 2]> = if drawn == 1.0 {
-                s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect()
-            } else {
-                let pts = sim.points();
-                b.points
-                    .iter()
-                    .map(|&p| {
-                        let (x, x0) = (pts.x[p], pts.x0[p]);
-                        [
-                            (x0[0] + drawn * (x[0] - x0[0])) as f32,
-                            (x0[1] + drawn * (x[1] - x0[1])) as f32,
-                        ]
-                    })
-                    .collect()
-            };
-            self.check(
-                self.rec.log(
-                    format!("boundaries/{name}/curve"),
-                    &rerun::LineStrips2D::new([curve])
-                        .with_colors([color])
-                        .with_radii([rerun::Radius::new_ui_points(width)])
-                        .with_labels([label])
-                        .with_draw_order(order::BOUNDARY),
-                ),
-            )?;
-            // The control points are the true curve's: none in a scaled
-            // drawing.
-            let control: Vec<[f32; 2]> = if drawn == 1.0 {
-                s.segments
-                    .iter()
-                    .flat_map(|seg| seg.iter().map(|p| [p[0] as f32, p[1] as f32]))
-                    .collect()
-            } else {
-                Vec::new()
-            };
-            self.check(
-                self.rec.log(
-                    format!("boundaries/{name}/control_points"),
-                    &rerun::Points2D::new(control)
-                        .with_colors([rerun::Color::from_rgb(240, 200, 40)])
-                        .with_radii([rerun::Radius::new_ui_points(2.5)])
-                        .with_draw_order(order::CONTROL_POINTS),
-                ),
-            )?;
-        }
-        Ok(())
-    }
-
-    /// The frame's colour scale: its own, or the run's so far (kept, with
-    /// the values, to colour the frame again when the run's widens); and
-    /// its values in words, with the deformation scale it is drawn at.
-    fn scale_frame(&mut self, frame: &mut Frame, drawn: f64) {
-        let own = colormap::Scale::of(frame.colour.iter().copied(), self.field.signed());
-        frame.described = colormap::describe(frame.colour.iter().copied());
-        if drawn != 1.0 {
-            frame.described = format!("{}; deformation drawn x{drawn:.3e}", frame.described);
-        }
-        let scale = match self.settings.colour_range {
-            crate::model::record::ColourRange::Frame => own,
-            crate::model::record::ColourRange::Run => {
-                let run = self.scale.map_or(own, |s| s.widen(own));
-                self.scale = Some(run);
-                let n = frame.colour.len();
-                if self.recolour_from.is_none() && self.recolour_values + n <= RECOLOUR_BUDGET {
-                    self.recolour_values += n;
-                    self.recolour.push(Recolour {
-                        step: frame.step,
-                        time: frame.time,
-                        scale: run,
-                        values: frame.colour.iter().map(|&v| v as f32).collect(),
-                        described: frame.described.clone(),
-                    });
-                } else {
-                    self.recolour_from.get_or_insert(frame.step);
-                }
-                run
-            }
-        };
-        frame.scale = scale;
-    }
-
-    /// Small strain: the scale the points' displacements are drawn at
-    /// (the scene's, or [`crate::model::record::deformation_scale`] of the
-    /// first state with a displacement, said in an event); 1 otherwise.
-    fn deformation_scale(&mut self, sim: &Simulation) -> Result<f64, RecordError> {
-        if sim.model().analysis.kind != crate::scene::AnalysisKind::QuasiStaticLinear {
-            return Ok(1.0);
-        }
-        if let Some(s) = self.deformation {
-            return Ok(s);
-        }
-        let pts = sim.points();
-        let u_max = (0..pts.len())
-            .map(|p| pts.displacement(p))
-            .map(|u| u[0].hypot(u[1]))
-            .fold(0.0, f64::max);
-        let s = match self.settings.deformation_scale {
-            Some(s) => s,
-            None if u_max > 0.0 && sim.load_factor() > 0.0 => {
-                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-                for x in &pts.x0 {
-                    for c in 0..2 {
-                        lo[c] = lo[c].min(x[c]);
-                        hi[c] = hi[c].max(x[c]);
-                    }
-                }
-                let size = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
-                crate::model::record::deformation_scale(u_max, sim.load_factor(), size)
-            }
-            None => return Ok(1.0),
-        };
-        self.deformation = Some(s);
-        // Said when the drawing is not true to scale (each frame's label
-        // says it too).
-        if s != 1.0 {
-            self.event(
-                &format!(
-                    "small strain: the points are drawn at x0 + {s} u{}",
-                    if self.settings.deformation_scale.is_some() {
-                        " (the scene's deformation_scale)"
-                    } else {
-                        " (the full-load displacement drawn as a tenth of the bodies' extent; \
-                         [record] deformation_scale sets it)"
-                    }
-                ),
-                rerun::TextLogLevel::INFO,
-            )?;
-        }
-        Ok(s)
-    }
-
-    /// With `colour_range = "run"`: colour every frame logged with a
-    /// narrower scale than the run's final one again with it.
-    fn recolour_frames(&mut self) -> Result<(), RecordError> {
-        let Some(run) = self.scale else { return Ok(()) };
-        if let Some(step) = self.recolour_from {
-            self.event(
-                &format!(
-                    "the frames from step {step} on keep the colour range they were drawn with \
-                     (the run's frames hold more than {RECOLOUR_BUDGET} values to colour again)"
-                ),
-                "WARN",
-            )?;
-        }
-        let mut colors = Vec::new();
-        for f in std::mem::take(&mut self.recolour)
-            .into_iter()
-            .filter(|f| f.scale != run)
-        {
-            self.rec.set_time_sequence("step", f.step);
-            if let Some(t) = f.time {
-                self.rec.set_duration_secs("time", t);
-            }
-            let values: Vec<f64> = f.values.iter().map(|&v| v as f64).collect();
-            colours_of(&run, &values, &mut colors);
-            self.check(self.rec.log(
-                "points",
-                &rerun::Points2D::update_fields().with_colors(colors.iter().copied()),
-            ))?;
-            self.check(self.rec.log(
-                "legend/range",
-                &self.legend.range(&run, &f.described, run.beyond(&values)),
-            ))?;
-            self.check(self.rec.log("legend/ticks", &self.legend.ticks(&run)))?;
-        }
-        self.rec.reset_time();
-        Ok(())
     }
 
     /// Log the current state if the cadence left it out: the last state
