@@ -489,8 +489,8 @@ fn updated_points(
         let g = st.gradient(|n| nodal[n]);
         // A B-bar patch's point strains with its operator.
         let op = bbar.and_then(|b| b.op(map, p));
-        let de = match bbar.and_then(|b| b.strain(map, p, nodal)) {
-            Some(e) => e,
+        let de = match &op {
+            Some(op) => Bbar::strain(op, st, nodal),
             None => [g[0][0], g[1][1], g[0][1] + g[1][0]],
         };
         let d = sim.model.materials[sim.model.bodies[old.body[p]].material].d_matrix();

@@ -3,7 +3,7 @@
 //! the implicit and B-spline boundaries, and the deformation scale a
 //! small-strain run is drawn at.
 
-use super::{cell_box, order, RecordError, Recorder};
+use super::{cell_box, drawn_at, order, RecordError, Recorder};
 use crate::simulation::Simulation;
 
 impl Recorder {
@@ -78,7 +78,7 @@ impl Recorder {
     pub(super) fn log_loads_and_probes(&self, sim: &Simulation, s: f64) -> Result<(), RecordError> {
         let m = sim.model();
         let pts = sim.points();
-        let drawn = |x: [f64; 2], u: [f64; 2]| [(x[0] + s * u[0]) as f32, (x[1] + s * u[1]) as f32];
+        let drawn = |x0: [f64; 2], u: [f64; 2]| drawn_at(x0, [x0[0] + u[0], x0[1] + u[1]], s);
         let force = m.units.of(crate::units::Quantity::Force);
         for (k, l) in m.point_loads.iter().enumerate() {
             let n = l.force[0].hypot(l.force[1]);
@@ -174,16 +174,7 @@ impl Recorder {
                 s.sample(16).iter().map(|p| [p[0] as f32, p[1] as f32]).collect()
             } else {
                 let pts = sim.points();
-                b.points
-                    .iter()
-                    .map(|&p| {
-                        let (x, x0) = (pts.x[p], pts.x0[p]);
-                        [
-                            (x0[0] + drawn * (x[0] - x0[0])) as f32,
-                            (x0[1] + drawn * (x[1] - x0[1])) as f32,
-                        ]
-                    })
-                    .collect()
+                b.points.iter().map(|&p| drawn_at(pts.x0[p], pts.x[p], drawn)).collect()
             };
             self.check(
                 self.rec.log(

@@ -103,6 +103,16 @@ fn cell_box(g: &crate::grid::Grid, c: usize) -> [[f32; 2]; 5] {
     [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
 }
 
+/// Where a point at `x` that started at `x0` is drawn at deformation scale
+/// `s`: `x0 + s (x - x0)` (`x` itself at `s = 1`).
+fn drawn_at(x0: [f64; 2], x: [f64; 2], s: f64) -> [f32; 2] {
+    if s == 1.0 {
+        [x[0] as f32, x[1] as f32]
+    } else {
+        [(x0[0] + s * (x[0] - x0[0])) as f32, (x0[1] + s * (x[1] - x0[1])) as f32]
+    }
+}
+
 /// Cell `c` drawn a sixth of a cell inside its grid lines.
 fn inset_box(g: &crate::grid::Grid, c: usize) -> [[f32; 2]; 5] {
     let m = g.cell_min(c % g.nx, c / g.nx);
@@ -143,16 +153,8 @@ impl Frame {
         self.time = sim.time();
         let pts = sim.points();
         self.positions.clear();
-        if s == 1.0 {
-            self.positions.extend(pts.x.iter().map(|x| [x[0] as f32, x[1] as f32]));
-        } else {
-            self.positions.extend(
-                pts.x
-                    .iter()
-                    .zip(&pts.x0)
-                    .map(|(x, x0)| [(x0[0] + s * (x[0] - x0[0])) as f32, (x0[1] + s * (x[1] - x0[1])) as f32]),
-            );
-        }
+        self.positions
+            .extend(pts.x.iter().zip(&pts.x0).map(|(&x, &x0)| drawn_at(x0, x, s)));
         self.radii.clear();
         self.radii
             .extend(pts.vol.iter().map(|v| (0.5 * v.max(0.0).sqrt()) as f32));

@@ -84,8 +84,13 @@ pub fn mpmlab(args: &[&str]) -> (i32, String, String) {
 
 /// Every text of a recording's `events` log, in file order.
 pub fn events(path: &std::path::Path) -> Vec<String> {
+    event_texts(&read_chunks(path))
+}
+
+/// The texts of the `events` log of a recording's chunks.
+pub fn event_texts(chunks: &[rerun::log::Chunk]) -> Vec<String> {
     let text = rerun::TextLog::descriptor_text().component;
-    read_chunks(path)
+    chunks
         .iter()
         .filter(|c| c.entity_path().to_string() == "/events")
         .flat_map(|c| {

@@ -613,15 +613,8 @@ fn the_scene_is_drawn_with_physical_y_up() {
 /// The deformation scale a small-strain recording names in its events (1
 /// when none is named: true scale).
 fn drawn_scale(chunks: &[rerun::log::Chunk]) -> f64 {
-    let text = rerun::TextLog::descriptor_text().component;
-    chunks
+    common::event_texts(chunks)
         .iter()
-        .filter(|c| c.entity_path().to_string() == "/events")
-        .flat_map(|c| {
-            c.iter_slices::<String>(text)
-                .flat_map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
-                .collect::<Vec<_>>()
-        })
         .find_map(|e| {
             let rest = e.split("drawn at x0 + ").nth(1)?;
             rest.split(' ').next()?.parse::<f64>().ok()
@@ -1414,20 +1407,6 @@ fn labels_of(chunks: &[rerun::log::Chunk], path: &str) -> Vec<String> {
         .collect()
 }
 
-/// The texts of the `events` log.
-fn event_texts(chunks: &[rerun::log::Chunk]) -> Vec<String> {
-    let text = rerun::TextLog::descriptor_text().component;
-    chunks
-        .iter()
-        .filter(|c| c.entity_path().to_string() == "/events")
-        .flat_map(|c| {
-            c.iter_slices::<String>(text)
-                .flat_map(|l| l.iter().map(|s| s.to_string()).collect::<Vec<_>>())
-                .collect::<Vec<_>>()
-        })
-        .collect()
-}
-
 #[test]
 fn conditions_loads_probes_and_warnings_are_drawn_and_named() {
     // The plate: two grid-line rollers, two probes, and Kirsch traction
@@ -1441,7 +1420,7 @@ fn conditions_loads_probes_and_warnings_are_drawn_and_named() {
     for p in ["probe hole_top", "probe hole_side"] {
         assert!(probes.iter().any(|l| l == p), "{probes:?}");
     }
-    let events = event_texts(&chunks);
+    let events = common::event_texts(&chunks);
     assert!(
         events
             .iter()
@@ -1464,7 +1443,7 @@ fn a_singular_condition_number_is_an_event_not_a_number() {
     // at some steps (the condition estimate above 1/eps): those are
     // events; every number logged is at most 1/eps.
     let (chunks, _, _) = record_steps("elastic-beam-ghost", 20);
-    let events = event_texts(&chunks);
+    let events = common::event_texts(&chunks);
     assert!(
         events
             .iter()

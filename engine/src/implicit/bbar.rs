@@ -23,6 +23,7 @@
 //! `eps += B_bar du`.
 
 use crate::assembly::Mapping;
+use crate::basis::StencilView;
 use crate::geometry::P2;
 use crate::ibm::Op;
 use crate::points::Points;
@@ -80,17 +81,15 @@ impl Bbar {
         )
     }
 
-    /// `eps_bar = B_bar u` at point `p` for nodal values `nodal` (per grid
-    /// node), or `None` for a point in no patch.
-    pub fn strain(&self, map: &Mapping, p: usize, nodal: &[P2]) -> Option<[f64; 3]> {
-        let op = self.op(map, p)?;
-        let st = map.stencils.get(p);
+    /// `eps_bar = B_bar u` for a point's operator `op` (from [`Bbar::op`])
+    /// on stencil `st`, for nodal values `nodal` (per grid node).
+    pub fn strain(op: &[Op], st: StencilView, nodal: &[P2]) -> [f64; 3] {
         let mut e = [0.0; 3];
         for (a, n) in st.nodes().enumerate() {
             for (r, row) in op[a].iter().enumerate() {
                 e[r] += row[0] * nodal[n][0] + row[1] * nodal[n][1];
             }
         }
-        Some(e)
+        e
     }
 }

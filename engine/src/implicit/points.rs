@@ -34,7 +34,8 @@ impl Contribution for SmallStrainPoints {
             let st = frame.map.stencils.get(p);
             let d = sim.material_of(p).d_matrix();
             if let Some(bb) = frame.bbar.as_ref() {
-                if let (Some(op), Some(eps)) = (bb.op(&frame.map, p), bb.strain(&frame.map, p, &s.da)) {
+                if let Some(op) = bb.op(&frame.map, p) {
+                    let eps = super::bbar::Bbar::strain(&op, st, &s.da);
                     ibm::add_bt_c_eps(st, &op, &d, eps, pts.vol[p], f_d);
                     continue;
                 }
