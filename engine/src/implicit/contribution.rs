@@ -83,4 +83,29 @@ pub(crate) trait Contribution {
     fn block(&self, _k: usize, _at: &At, _out: &mut Vec<f64>) -> Result<(), StepFailure> {
         Ok(())
     }
+
+    /// Add block `k`'s values at `at` to `out` (row-major `2m x 2m`, as
+    /// [`Contribution::block`] gives them), entry by entry: the way the
+    /// core sums the contributions that share a block's node list. The
+    /// default forms the block in `scratch` and adds it; a contribution
+    /// whose block is sparse adds its nonzero entries alone (the sum is
+    /// the same to the bit: the others would add zeros).
+    fn add_block(&self, k: usize, at: &At, out: &mut [f64], scratch: &mut Vec<f64>) -> Result<(), StepFailure> {
+        self.block(k, at, scratch)?;
+        if scratch.len() != out.len() {
+            return Err(StepFailure::Internal {
+                step: at.frame.step,
+                message: format!(
+                    "the {} contribution's block {k} has {} values where {} were expected",
+                    self.name(),
+                    scratch.len(),
+                    out.len()
+                ),
+            });
+        }
+        for (o, v) in out.iter_mut().zip(scratch.iter()) {
+            *o += v;
+        }
+        Ok(())
+    }
 }

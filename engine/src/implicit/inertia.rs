@@ -374,22 +374,55 @@ impl Contribution for std::rc::Rc<Inertia> {
     }
 
     fn block(&self, k: usize, at: &At, out: &mut Vec<f64>) -> Result<(), StepFailure> {
-        let (map, pts) = (&at.frame.map, &at.frame.sim.state.points);
-        let c0 = self.scheme.stiffness_factor();
-        let groups = map.groups.len();
+        let groups = at.frame.map.groups.len();
         if k >= groups {
-            let gamma = if at.stabilised { self.mass.gamma_m * c0 } else { 0.0 };
+            let gamma = if at.stabilised { self.mass.gamma_m * self.scheme.stiffness_factor() } else { 0.0 };
             self.faces[k - groups].stiffness(gamma, out);
             return Ok(());
         }
+        let m2 = 2 * at.frame.map.groups[k].nodes.len();
+        out.clear();
+        out.resize(m2 * m2, 0.0);
+        self.add_group_block(k, at, out);
+        Ok(())
+    }
+
+    /// A point group's block is `(scalar) (x) I_2`: its x-y entries are
+    /// zeros, so only the x-x and y-y ones are added.
+    fn add_block(&self, k: usize, at: &At, out: &mut [f64], scratch: &mut Vec<f64>) -> Result<(), StepFailure> {
+        let map = &at.frame.map;
+        if k >= map.groups.len() || out.len() != (2 * map.groups[k].nodes.len()).pow(2) {
+            self.block(k, at, scratch)?;
+            if scratch.len() != out.len() {
+                return Err(StepFailure::Internal {
+                    step: at.frame.step,
+                    message: format!("the inertia's block {k} does not match the block it joins"),
+                });
+            }
+            for (o, v) in out.iter_mut().zip(scratch.iter()) {
+                *o += v;
+            }
+            return Ok(());
+        }
+        self.add_group_block(k, at, out);
+        Ok(())
+    }
+}
+
+impl Inertia {
+    /// Add point group `k`'s block `(1 - alpha) / (beta dt^2) sum_p m_p
+    /// S_a S_b (x) I_2` (the lumped mass: its diagonal) to `out`, row-major
+    /// `2n x 2n` over the group's `n` nodes.
+    fn add_group_block(&self, k: usize, at: &At, out: &mut [f64]) {
+        let (map, pts) = (&at.frame.map, &at.frame.sim.state.points);
+        let c0 = self.scheme.stiffness_factor();
         // A group's points share one stencil node list, the group's
         // (`assembly::groups`): a stencil's index is the block's.
         let g = &map.groups[k];
         let n = g.nodes.len();
         let m2 = 2 * n;
-        // The scalar block `sum_p m_p c0 S_a S_b` (the lumped mass: its
-        // diagonal), then `(x) I_2`; it and a point's weights on the
-        // stack for stencils of up to 4 x 4 nodes (GIMP's).
+        // The scalar block `sum_p m_p c0 S_a S_b` and a point's weights on
+        // the stack for stencils of up to 4 x 4 nodes (GIMP's).
         const SMALL: usize = 16;
         let (mut small, mut large) = ([0.0; SMALL * SMALL + SMALL], Vec::new());
         let buffer: &mut [f64] = if n <= SMALL {
@@ -421,15 +454,12 @@ impl Contribution for std::rc::Rc<Inertia> {
                 }
             }
         }
-        out.clear();
-        out.resize(m2 * m2, 0.0);
         for a in 0..n {
             for b in 0..n {
                 let v = scalar[a * n + b];
-                out[2 * a * m2 + 2 * b] = v;
-                out[(2 * a + 1) * m2 + 2 * b + 1] = v;
+                out[2 * a * m2 + 2 * b] += v;
+                out[(2 * a + 1) * m2 + 2 * b + 1] += v;
             }
         }
-        Ok(())
     }
 }

@@ -169,31 +169,34 @@ impl Assembly {
         let assembled = self.pattern.assemble_with(&frame.map.dofs, &nodes, |b, out| {
             let m2 = 2 * nodes[b].len();
             let members = &self.blocks.members[self.blocks.start[b]..self.blocks.start[b + 1]];
-            for (i, &(c, k)) in members.iter().enumerate() {
-                let into = if i == 0 { &mut *out } else { &mut more };
-                if let Err(e) = self.list[c].block(k, at, into) {
+            let Some((&(c, k), rest)) = members.split_first() else {
+                out.clear();
+                out.resize(m2 * m2, 0.0);
+                return;
+            };
+            if let Err(e) = self.list[c].block(k, at, out) {
+                failure.get_or_insert(e);
+                out.clear();
+            }
+            // A block of the wrong size is a bug of its contribution: a
+            // failure naming it, not a panic in the assembly.
+            if out.len() != m2 * m2 {
+                failure.get_or_insert(StepFailure::Internal {
+                    step: frame.step,
+                    message: format!(
+                        "the {} contribution's block {k} has {} values for {} nodes",
+                        self.list[c].name(),
+                        out.len(),
+                        m2 / 2
+                    ),
+                });
+                out.clear();
+                out.resize(m2 * m2, 0.0);
+            }
+            // The block's other members added to it, in the list's order.
+            for &(c, k) in rest {
+                if let Err(e) = self.list[c].add_block(k, at, out, &mut more) {
                     failure.get_or_insert(e);
-                    into.clear();
-                }
-                // A block of the wrong size is a bug of its contribution: a
-                // failure naming it, not a panic in the assembly.
-                if into.len() != m2 * m2 {
-                    failure.get_or_insert(StepFailure::Internal {
-                        step: frame.step,
-                        message: format!(
-                            "the {} contribution's block {k} has {} values for {} nodes",
-                            self.list[c].name(),
-                            into.len(),
-                            m2 / 2
-                        ),
-                    });
-                    into.clear();
-                    into.resize(m2 * m2, 0.0);
-                }
-                if i > 0 {
-                    for (o, v) in out.iter_mut().zip(&more) {
-                        *o += v;
-                    }
                 }
             }
         });
