@@ -607,46 +607,103 @@ impl Pattern {
     ) -> Result<(Vec<f64>, Vec<f64>), FactorError> {
         let mut values = try_filled(self.nnz(), 0.0, "the values of the sparse matrix")?;
         let mut coupling = try_filled(self.n, 0.0, "the coupling to prescribed values")?;
-        let ri = self.symbolic.row_idx();
-        let mut kb = Vec::new();
-        let mut bd = Vec::new();
+        let (mut kb, mut bd) = (Vec::new(), Vec::new());
         for (b, nodes) in blocks.iter().enumerate() {
             fill(b, &mut kb);
-            let m2 = 2 * nodes.len();
-            bd.clear();
-            bd.extend(nodes.iter().flat_map(|&n| dofs.node_dof[n]));
-            for (c, dc) in bd.iter().enumerate() {
-                match *dc {
-                    Dof::Free(col) => {
-                        let range = self.symbolic.col_range(col);
-                        let column = &ri[range.clone()];
-                        for (r, dr) in bd.iter().enumerate() {
-                            if let Dof::Free(row) = *dr {
-                                if self.storage == Storage::Full || row >= col {
-                                    let k = column
-                                        .binary_search(&(row as Ix))
-                                        .expect("the pattern holds every block entry");
-                                    values[range.start + k] += kb[r * m2 + c];
-                                }
-                            }
-                        }
-                    }
-                    Dof::Fixed(k) => {
-                        let du = dofs.constrained[k].2;
-                        if du == 0.0 {
-                            continue;
-                        }
-                        for (r, dr) in bd.iter().enumerate() {
-                            if let Dof::Free(row) = *dr {
-                                coupling[row] += kb[r * m2 + c] * du;
-                            }
-                        }
-                    }
-                    Dof::Inactive => {}
-                }
-            }
+            self.scatter(dofs, nodes, &kb, &mut bd, &mut values, &mut coupling);
         }
         Ok((values, coupling))
+    }
+
+    /// As [`Pattern::assemble_with`], with the blocks formed on `pool`'s
+    /// threads (`fill(b, out, scratch)` writes block `b` into `out`), a
+    /// batch at a time, and scattered in block order: every entry is the
+    /// same sum in the same order, so any number of threads gives the
+    /// serial values to the bit.
+    pub fn assemble_on(
+        &self,
+        dofs: &DofMap,
+        blocks: &[&[usize]],
+        pool: Option<&rayon::ThreadPool>,
+        fill: impl Fn(usize, &mut Vec<f64>, &mut Vec<f64>) + Sync,
+    ) -> Result<(Vec<f64>, Vec<f64>), FactorError> {
+        let Some(pool) = pool else {
+            let mut scratch = Vec::new();
+            return self.assemble_with(dofs, blocks, |b, out| fill(b, out, &mut scratch));
+        };
+        use rayon::prelude::*;
+        let mut values = try_filled(self.nnz(), 0.0, "the values of the sparse matrix")?;
+        let mut coupling = try_filled(self.n, 0.0, "the coupling to prescribed values")?;
+        // A batch's blocks and scratch: a few per thread, so each thread
+        // has work while the batch before is scattered.
+        let batch = 64 * pool.current_num_threads();
+        let mut buffers: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); batch.min(blocks.len())];
+        let mut bd = Vec::new();
+        // The scatter runs on one of the pool's threads too: on a machine
+        // with as many cores as threads, a caller's thread beside them
+        // would take a core from one.
+        pool.install(|| {
+            for b0 in (0..blocks.len()).step_by(batch) {
+                let len = batch.min(blocks.len() - b0);
+                buffers[..len]
+                    .par_iter_mut()
+                    .with_min_len(8)
+                    .enumerate()
+                    .for_each(|(i, (out, scratch))| fill(b0 + i, out, scratch));
+                for (i, (kb, _)) in buffers[..len].iter().enumerate() {
+                    self.scatter(dofs, blocks[b0 + i], kb, &mut bd, &mut values, &mut coupling);
+                }
+            }
+        });
+        Ok((values, coupling))
+    }
+
+    /// Add block `kb` (row-major `2m x 2m` over `nodes`) into `values`
+    /// and its columns of prescribed dofs times their increments into
+    /// `coupling`; `bd` is scratch for the block's dofs.
+    fn scatter(
+        &self,
+        dofs: &DofMap,
+        nodes: &[usize],
+        kb: &[f64],
+        bd: &mut Vec<Dof>,
+        values: &mut [f64],
+        coupling: &mut [f64],
+    ) {
+        let ri = self.symbolic.row_idx();
+        let m2 = 2 * nodes.len();
+        bd.clear();
+        bd.extend(nodes.iter().flat_map(|&n| dofs.node_dof[n]));
+        for (c, dc) in bd.iter().enumerate() {
+            match *dc {
+                Dof::Free(col) => {
+                    let range = self.symbolic.col_range(col);
+                    let column = &ri[range.clone()];
+                    for (r, dr) in bd.iter().enumerate() {
+                        if let Dof::Free(row) = *dr {
+                            if self.storage == Storage::Full || row >= col {
+                                let k = column
+                                    .binary_search(&(row as Ix))
+                                    .expect("the pattern holds every block entry");
+                                values[range.start + k] += kb[r * m2 + c];
+                            }
+                        }
+                    }
+                }
+                Dof::Fixed(k) => {
+                    let du = dofs.constrained[k].2;
+                    if du == 0.0 {
+                        continue;
+                    }
+                    for (r, dr) in bd.iter().enumerate() {
+                        if let Dof::Free(row) = *dr {
+                            coupling[row] += kb[r * m2 + c] * du;
+                        }
+                    }
+                }
+                Dof::Inactive => {}
+            }
+        }
     }
 }
 

@@ -103,86 +103,90 @@ pub(crate) fn evaluate_with(
             .collect();
         (c, groups)
     });
+    // Each point's response (parallel on the simulation's threads, each
+    // point on its own), then the forces summed in point order: any
+    // number of threads gives the serial result to the bit.
+    let respond = |p: usize| -> (Option<Response>, Option<FbarPoint>) {
+        if pts.vol0[p] == 0.0 {
+            return (None, None);
+        }
+        let st = map.stencils.get(p);
+        let be = be_matrix(pts.b_e_at(p));
+        if let Some((ops, d, da)) = band.and_then(|(ops, d, da)| ops[p].as_ref().map(|o| (o, d, da))) {
+            return (Some(sim.hencky(p).respond(&band_gradient(st, ops, d, da), &be)), None);
+        }
+        let Some((c, df)) = fbar.as_ref().and_then(|(c, _)| c[p]) else {
+            return (Some(sim.hencky(p).respond(&increment_gradient(st, total), &be)), None);
+        };
+        let r = sim.hencky(p).respond(&(df * c), &be);
+        let mut q = r.p;
+        for i in 0..2 {
+            for j in 0..2 {
+                for k in 0..2 {
+                    for l in 0..2 {
+                        q[(i, j)] += c * r.a[i][j][k][l] * df[(k, l)];
+                    }
+                }
+            }
+        }
+        let point = FbarPoint {
+            c,
+            j: df.determinant(),
+            finv_t: df.try_inverse().map_or(Matrix2::zeros(), |m| m.transpose()),
+            q,
+        };
+        (Some(r), Some(point))
+    };
+    let mut responses: Vec<Option<Response>> = try_with_capacity(pts.len(), "the points' material responses")?;
+    responses.resize(pts.len(), None);
+    let n_fbar = if fbar.is_some() { pts.len() } else { 0 };
+    let mut fbar_points: Vec<Option<FbarPoint>> = try_filled(n_fbar, None, "the points' F-bar operators")?;
+    sim.for_each_point(&mut responses, &mut fbar_points, |p, r, f| {
+        let (rp, fp) = respond(p);
+        *r = rp;
+        if let Some(f) = f {
+            *f = fp;
+        }
+    });
     let mut it = Iterate {
-        responses: try_with_capacity(pts.len(), "the points' material responses")?,
+        responses,
         fint_free: try_filled(map.dofs.n_free, 0.0, "the internal forces")?,
         fint_fixed: try_filled(map.dofs.constrained.len(), 0.0, "the reactions")?,
         fbar: None,
     };
-    let n_fbar = if fbar.is_some() { pts.len() } else { 0 };
-    let mut fbar_points: Vec<Option<FbarPoint>> = try_filled(n_fbar, None, "the points' F-bar operators")?;
     let mut add = |n: usize, i: usize, f: f64| match map.dofs.node_dof[n][i] {
         Dof::Free(k) => it.fint_free[k] += f,
         Dof::Fixed(k) => it.fint_fixed[k] += f,
         Dof::Inactive => {}
     };
     for p in 0..pts.len() {
-        if pts.vol0[p] == 0.0 {
-            it.responses.push(None);
-            continue;
-        }
+        let Some(r) = &it.responses[p] else { continue };
         let st = map.stencils.get(p);
         let v0 = pts.vol0[p];
-        let ops = band.and_then(|(ops, d, da)| ops[p].as_ref().map(|o| (o, d, da)));
-        let r = match ops {
-            None => match fbar.as_ref().and_then(|(c, _)| c[p]) {
-                None => {
-                    let r = sim
-                        .hencky(p)
-                        .respond(&increment_gradient(st, total), &be_matrix(pts.b_e_at(p)));
-                    for (n, _, g) in st.iter() {
-                        for i in 0..2 {
-                            add(n, i, (r.p[(i, 0)] * g[0] + r.p[(i, 1)] * g[1]) * v0);
-                        }
-                    }
-                    r
-                }
-                Some((c, df)) => {
-                    let r = sim.hencky(p).respond(&(df * c), &be_matrix(pts.b_e_at(p)));
-                    // P = tau(dF_bar) dF^-T = c P_bar.
-                    let pm = r.p * c;
-                    for (n, _, g) in st.iter() {
-                        for i in 0..2 {
-                            add(n, i, (pm[(i, 0)] * g[0] + pm[(i, 1)] * g[1]) * v0);
-                        }
-                    }
-                    let mut q = r.p;
+        if let Some(ops) = band.and_then(|(ops, _, _)| ops[p].as_ref()) {
+            for (k, (n, _, _)) in st.iter().enumerate() {
+                for l in 0..2 {
+                    let mut f = 0.0;
                     for i in 0..2 {
                         for j in 0..2 {
-                            for k in 0..2 {
-                                for l in 0..2 {
-                                    q[(i, j)] += c * r.a[i][j][k][l] * df[(k, l)];
-                                }
-                            }
+                            f += r.p[(i, j)] * ops[k][l][i][j];
                         }
                     }
-                    fbar_points[p] = Some(FbarPoint {
-                        c,
-                        j: df.determinant(),
-                        finv_t: df.try_inverse().map_or(Matrix2::zeros(), |m| m.transpose()),
-                        q,
-                    });
-                    r
+                    add(n, l, f * v0);
                 }
-            },
-            Some((ops, d, da)) => {
-                let df = band_gradient(st, ops, d, da);
-                let r = sim.hencky(p).respond(&df, &be_matrix(pts.b_e_at(p)));
-                for (k, (n, _, _)) in st.iter().enumerate() {
-                    for l in 0..2 {
-                        let mut f = 0.0;
-                        for i in 0..2 {
-                            for j in 0..2 {
-                                f += r.p[(i, j)] * ops[k][l][i][j];
-                            }
-                        }
-                        add(n, l, f * v0);
-                    }
-                }
-                r
             }
+            continue;
+        }
+        // P = tau(dF_bar) dF^-T = c P_bar in an F-bar patch.
+        let pm = match fbar_points.get(p).and_then(|f| f.as_ref()) {
+            Some(f) => r.p * f.c,
+            None => r.p,
         };
-        it.responses.push(Some(r));
+        for (n, _, g) in st.iter() {
+            for i in 0..2 {
+                add(n, i, (pm[(i, 0)] * g[0] + pm[(i, 1)] * g[1]) * v0);
+            }
+        }
     }
     it.fbar = fbar.map(|(_, g)| (fbar_points, g));
     Ok(it)

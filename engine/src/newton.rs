@@ -111,7 +111,7 @@ struct Setup<'a> {
     /// Each boundary at the start of the step, for the report.
     boundaries: Vec<BoundaryReport>,
     /// Implicit dynamics: the step's inertia (also in the list).
-    inertia: Option<std::rc::Rc<Inertia>>,
+    inertia: Option<std::sync::Arc<Inertia>>,
 }
 
 /// What drives a Newton step beside the loads: nothing (quasi-static), or
@@ -160,7 +160,7 @@ impl<'a> Setup<'a> {
                     }
                 }
                 let previous = &sim.state.grid_acceleration;
-                Some(std::rc::Rc::new(Inertia::new(&frame, scheme, &r0, previous)?))
+                Some(std::sync::Arc::new(Inertia::new(&frame, scheme, &r0, previous)?))
             }
         };
         let list = contributions(&frame, Response::Finite, dead, inertia.clone())?;

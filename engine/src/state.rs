@@ -371,6 +371,8 @@ impl Simulation {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|i| format!("mpmlab-points-{i}"))
+            // A thread starts with its parent's vector registers.
+            .start_handler(|_| crate::linalg::after_wide_kernels())
             .build()
             .map_err(|e| format!("cannot start {threads} threads: {e}"))?;
         let n = pool.current_num_threads();
@@ -378,9 +380,48 @@ impl Simulation {
         Ok(n)
     }
 
-    /// The threads the explicit step's material updates run on.
+    /// The threads the steps' per-point and per-block work runs on.
     pub fn threads(&self) -> usize {
         self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+    }
+
+    /// `f(i, &mut a[i], b.get_mut(i))` for every index of `a` (`b` is
+    /// empty or as long as `a`), on the simulation's threads in chunks of
+    /// consecutive indices. Each call owns its entries, so the result is
+    /// the same for any number of threads.
+    pub(crate) fn for_each_point<A: Send, B: Send>(
+        &self,
+        a: &mut [A],
+        b: &mut [B],
+        f: impl Fn(usize, &mut A, Option<&mut B>) + Sync,
+    ) {
+        debug_assert!(b.is_empty() || b.len() == a.len());
+        let run = |start: usize, a: &mut [A], b: &mut [B]| {
+            crate::linalg::after_wide_kernels();
+            let mut b = b.iter_mut();
+            for (i, a) in a.iter_mut().enumerate() {
+                f(start + i, a, b.next());
+            }
+        };
+        let Some(pool) = &self.pool else {
+            run(0, a, b);
+            return;
+        };
+        use rayon::prelude::*;
+        let chunk = a.len().div_ceil(8 * pool.current_num_threads()).max(64);
+        let b_chunk = if b.is_empty() { 0 } else { chunk };
+        pool.install(|| {
+            let mut jobs = Vec::new();
+            let (mut a, mut b, mut start) = (a, b, 0);
+            while !a.is_empty() {
+                let (ah, at) = a.split_at_mut(chunk.min(a.len()));
+                let (bh, bt) = b.split_at_mut(b_chunk.min(b.len()));
+                jobs.push((start, ah, bh));
+                start += chunk;
+                (a, b) = (at, bt);
+            }
+            jobs.into_par_iter().for_each(|(start, a, b)| run(start, a, b));
+        });
     }
 
     /// Whether the observer's stop flag is set.

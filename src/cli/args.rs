@@ -89,8 +89,9 @@ pub struct TuiArgs {
     /// k, M, G, T); default half of the available memory.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub max_memory: Option<u64>,
-    /// Explicit dynamics: threads for the points' material updates (0:
-    /// one per core; default 1). Results are the same to the bit.
+    /// Threads for the points' material updates and, in implicit steps,
+    /// the tangent's blocks (0: one per core; default 1). Results are the
+    /// same to the bit for any count.
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Start from a checkpoint of this scene (`run --checkpoint`, or `w`
@@ -143,9 +144,10 @@ pub struct RunArgs {
     pub cadence: RecordArgs,
     #[command(flatten)]
     pub vtk: VtkArgs,
-    /// Explicit dynamics: threads for the points' material updates (0:
-    /// one per core; default 1). Results are the same to the bit for any
-    /// count. Sweeps run one scene per core instead.
+    /// Threads for the points' material updates and, in implicit steps,
+    /// the tangent's blocks (0: one per core; default 1). Results are the
+    /// same to the bit for any count. Sweeps run one scene per core
+    /// instead.
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Print only the summary.

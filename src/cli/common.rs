@@ -32,15 +32,13 @@ pub fn use_threads(sim: &mut Simulation, threads: Option<usize>, quiet: bool) ->
     let Some(n) = threads else { return Ok(()) };
     match sim.set_threads(n) {
         Ok(k) if !quiet => {
-            let explicit = sim.model().analysis.kind == mpmlab::scene::AnalysisKind::ExplicitDynamics;
-            println!(
-                "threads: {k} for the points' material updates{}",
-                if explicit {
-                    ""
-                } else {
-                    " (explicit dynamics only: this analysis runs on one)"
-                }
-            );
+            use mpmlab::scene::AnalysisKind;
+            let work = match sim.model().analysis.kind {
+                AnalysisKind::ExplicitDynamics => "the points' material updates",
+                AnalysisKind::QuasiStaticLinear => "the tangent's blocks (the factorisation and solve run on one)",
+                _ => "the points' material updates and the tangent's blocks (the factorisation and solve run on one)",
+            };
+            println!("threads: {k} for {work}");
             Ok(())
         }
         Ok(_) => Ok(()),

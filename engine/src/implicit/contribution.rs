@@ -43,7 +43,7 @@ pub(crate) struct At<'a, 's> {
 
 /// A method's part of an implicit step (see the module's documentation).
 /// Every method has defaults for what it does not add.
-pub(crate) trait Contribution {
+pub(crate) trait Contribution: Sync {
     /// What it is, for reports and diagnostics (`points`, `ghost`,
     /// `band`, `dead loads`, `traction`).
     fn name(&self) -> &'static str;

@@ -354,7 +354,7 @@ fn free_values(frame: &Frame, f: &[P2]) -> Vec<f64> {
 /// ghost faces', its force `f_I` and its block `(1 - alpha) M / (beta
 /// dt^2)`. Shared with the driver, which reads the grid's motion after
 /// the step.
-impl Contribution for std::rc::Rc<Inertia> {
+impl Contribution for std::sync::Arc<Inertia> {
     fn name(&self) -> &'static str {
         "inertia"
     }
@@ -376,7 +376,11 @@ impl Contribution for std::rc::Rc<Inertia> {
     fn block(&self, k: usize, at: &At, out: &mut Vec<f64>) -> Result<(), StepFailure> {
         let groups = at.frame.map.groups.len();
         if k >= groups {
-            let gamma = if at.stabilised { self.mass.gamma_m * self.scheme.stiffness_factor() } else { 0.0 };
+            let gamma = if at.stabilised {
+                self.mass.gamma_m * self.scheme.stiffness_factor()
+            } else {
+                0.0
+            };
             self.faces[k - groups].stiffness(gamma, out);
             return Ok(());
         }

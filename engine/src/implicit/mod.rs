@@ -164,9 +164,17 @@ impl Assembly {
             });
         }
         let nodes = self.blocks.nodes(&all);
-        let mut failure = None;
-        let mut more = Vec::new();
-        let assembled = self.pattern.assemble_with(&frame.map.dofs, &nodes, |b, out| {
+        // The first failure in block order (the same for any number of
+        // threads).
+        let failure = std::sync::Mutex::new(None::<(usize, StepFailure)>);
+        let fail = |b: usize, e: StepFailure| {
+            let mut f = failure.lock().unwrap_or_else(|e| e.into_inner());
+            if f.as_ref().is_none_or(|(first, _)| b < *first) {
+                *f = Some((b, e));
+            }
+        };
+        let pool = frame.sim.pool.as_deref();
+        let assembled = self.pattern.assemble_on(&frame.map.dofs, &nodes, pool, |b, out, more| {
             let m2 = 2 * nodes[b].len();
             let members = &self.blocks.members[self.blocks.start[b]..self.blocks.start[b + 1]];
             let Some((&(c, k), rest)) = members.split_first() else {
@@ -175,31 +183,35 @@ impl Assembly {
                 return;
             };
             if let Err(e) = self.list[c].block(k, at, out) {
-                failure.get_or_insert(e);
+                fail(b, e);
                 out.clear();
             }
             // A block of the wrong size is a bug of its contribution: a
             // failure naming it, not a panic in the assembly.
             if out.len() != m2 * m2 {
-                failure.get_or_insert(StepFailure::Internal {
-                    step: frame.step,
-                    message: format!(
-                        "the {} contribution's block {k} has {} values for {} nodes",
-                        self.list[c].name(),
-                        out.len(),
-                        m2 / 2
-                    ),
-                });
+                fail(
+                    b,
+                    StepFailure::Internal {
+                        step: frame.step,
+                        message: format!(
+                            "the {} contribution's block {k} has {} values for {} nodes",
+                            self.list[c].name(),
+                            out.len(),
+                            m2 / 2
+                        ),
+                    },
+                );
                 out.clear();
                 out.resize(m2 * m2, 0.0);
             }
             // The block's other members added to it, in the list's order.
             for &(c, k) in rest {
-                if let Err(e) = self.list[c].add_block(k, at, out, &mut more) {
-                    failure.get_or_insert(e);
+                if let Err(e) = self.list[c].add_block(k, at, out, more) {
+                    fail(b, e);
                 }
             }
         });
+        let failure = failure.into_inner().unwrap_or_else(|e| e.into_inner()).map(|(_, e)| e);
         match (failure, assembled) {
             (Some(e), _) => Err(e),
             (None, Err(e)) => Err(e.at_step(frame.step)),
@@ -294,7 +306,7 @@ pub(crate) fn contributions(
     frame: &Frame,
     response: Response,
     dead: Vec<f64>,
-    inertia: Option<std::rc::Rc<Inertia>>,
+    inertia: Option<std::sync::Arc<Inertia>>,
 ) -> Result<Vec<Box<dyn Contribution>>, StepFailure> {
     let mut list: Vec<Box<dyn Contribution>> = match response {
         Response::Linear => vec![Box::new(points::SmallStrainPoints)],

@@ -138,3 +138,30 @@ pub fn saved_seeds(source: &'static str) -> usize {
         .load_persisted_failures2(Some(source))
         .len()
 }
+
+/// Every field a step updates, per point, as bits: equal vectors are the
+/// same state bit for bit. A field a kind of run does not keep (velocities
+/// in a quasi-static run, GIMP domains of standard points) is empty and
+/// adds nothing.
+pub fn point_bits(sim: &Simulation) -> Vec<u64> {
+    let p = sim.points();
+    let mut bits = Vec::new();
+    for i in 0..p.len() {
+        let pairs = [p.x.get(i), p.v.get(i), p.lp.get(i)];
+        let tensors = [
+            p.stress.get(i).map(|v| &v[..]),
+            p.def_grad.get(i).map(|v| &v[..]),
+            p.b_e.get(i).map(|v| &v[..]),
+        ];
+        let scalars = [p.vol.get(i), p.szz.get(i), p.dissipation.get(i)];
+        let values = pairs
+            .into_iter()
+            .flatten()
+            .flat_map(|v| v.iter())
+            .chain(tensors.into_iter().flatten().flatten())
+            .chain(scalars.into_iter().flatten());
+        bits.extend(values.map(|v| v.to_bits()));
+        bits.extend(p.yielding.get(i).map(|&y| y as u64));
+    }
+    bits
+}

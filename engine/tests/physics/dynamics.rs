@@ -2,7 +2,7 @@
 //! of free motion, mass conditioning, energy balance, momentum.
 
 use crate::common;
-use common::{error, sim_with};
+use common::{error, point_bits, sim_with};
 use mpmlab_engine::linalg::ConditionMethod;
 use mpmlab_engine::scene::{ConditionMode, MassKind, RegionSpec, StressUpdate, VelocityUpdate};
 use mpmlab_engine::simulation::StepFailure;
@@ -803,21 +803,6 @@ max_cutbacks = {max_cutbacks}
 "#
     );
     Simulation::new(mpmlab_engine::Model::from_text(&text, &format!("{name}.toml")).unwrap_or_else(|e| panic!("{e}")))
-}
-
-/// Every field a step updates, per point, as bits: equal vectors are the
-/// same state bit for bit.
-fn point_bits(sim: &Simulation) -> Vec<u64> {
-    let p = sim.points();
-    let mut bits = Vec::new();
-    for i in 0..p.len() {
-        let values = (p.x[i].iter().chain(&p.v[i]).chain(&p.lp[i]))
-            .chain(p.stress[i].iter().chain(&p.def_grad[i]).chain(&p.b_e[i]))
-            .chain([&p.vol[i], &p.szz[i], &p.dissipation[i]]);
-        bits.extend(values.map(|v| v.to_bits()));
-        bits.push(p.yielding[i] as u64);
-    }
-    bits
 }
 
 #[test]

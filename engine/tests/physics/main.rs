@@ -27,3 +27,4 @@ mod operators;
 mod patch;
 mod points;
 mod probes;
+mod threads;
