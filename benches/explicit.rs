@@ -316,6 +316,33 @@ fn throughput() {
         t_l / t_l2,
         t_s / t_s2
     );
+    // The ratios explicit dynamics is held to, as the solver bench's.
+    println!();
+    println!(
+        "ratios, {} cores, one run:",
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    );
+    println!("  {:<46} {:>9} {:>8}  met", "measure", "measured", "target");
+    let share = 100.0 * lumped / reference;
+    for (what, shown, target, met) in [
+        (
+            "explicit lumped, % of the minimal kernel",
+            format!("{share:.1}"),
+            ">= 30",
+            share >= 30.0,
+        ),
+        (
+            "explicit stabilised / lumped step",
+            format!("{:.2}", t_s / t_l),
+            "<= 2",
+            t_s / t_l <= 2.0,
+        ),
+    ] {
+        println!(
+            "  {what:<46} {shown:>9} {target:>8}  {}",
+            if met { "yes" } else { "NO" }
+        );
+    }
     assert_eq!((n, n_s), (n_l, n_l));
 }
 
