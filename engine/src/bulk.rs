@@ -56,6 +56,13 @@ pub(crate) struct Iterate {
     fbar: Option<FbarPatches>,
 }
 
+impl Iterate {
+    /// The responses' buffer, for [`evaluate_reusing`].
+    pub(crate) fn into_responses(self) -> Vec<Option<Response>> {
+        self.responses
+    }
+}
+
 /// The implicit boundaries as the points see them: per point its band
 /// operators (if it lies in a band), the unknowns `d` and `d^a` per node.
 pub(crate) type BandView<'a> = (&'a [Option<Vec<GradOp>>], &'a [P2], &'a [P2]);
@@ -70,6 +77,20 @@ pub(crate) fn evaluate_with(
     map: &Mapping,
     total: &[P2],
     band: Option<BandView>,
+) -> Result<Iterate, FactorError> {
+    evaluate_reusing(sim, map, total, band, Vec::new())
+}
+
+/// [`evaluate_with`] writing the responses into `spare` (an earlier
+/// iterate's, [`Iterate::into_responses`]) when it holds one per point:
+/// a Newton step's residuals then reuse one buffer (about 330 bytes a
+/// point) instead of having fresh pages zeroed by the system each time.
+pub(crate) fn evaluate_reusing(
+    sim: &Simulation,
+    map: &Mapping,
+    total: &[P2],
+    band: Option<BandView>,
+    spare: Vec<Option<Response>>,
 ) -> Result<Iterate, FactorError> {
     let pts = &sim.state.points;
     let in_band = |p: usize| band.is_some_and(|(ops, _, _)| ops[p].is_some());
@@ -137,8 +158,13 @@ pub(crate) fn evaluate_with(
         };
         (Some(r), Some(point))
     };
-    let mut responses: Vec<Option<Response>> = try_with_capacity(pts.len(), "the points' material responses")?;
-    responses.resize(pts.len(), None);
+    // Every entry is written below: a spare of the right length is used
+    // as it is.
+    let mut responses = spare;
+    if responses.len() != pts.len() {
+        responses = try_with_capacity(pts.len(), "the points' material responses")?;
+        responses.resize(pts.len(), None);
+    }
     let n_fbar = if fbar.is_some() { pts.len() } else { 0 };
     let mut fbar_points: Vec<Option<FbarPoint>> = try_filled(n_fbar, None, "the points' F-bar operators")?;
     sim.for_each_point(&mut responses, &mut fbar_points, |p, r, f| {

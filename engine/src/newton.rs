@@ -385,8 +385,10 @@ fn newton(setup: &Setup, timings: &mut Timings) -> Result<Solved, StepFailure> {
         let k = setup.tangent(&res, &d, true)?;
         timings.assembly += t.elapsed().as_secs_f64();
         let (factor, dd) = factorise_and_solve(setup, &k, &mut symbolic, &res.r, iterations, timings, spare)?;
-        // The full correction; its residual opens the next iteration.
+        // The full correction; its residual opens the next iteration (in
+        // the last one's buffers).
         let t = Instant::now();
+        setup.assembly.recycle(res);
         res = correct(setup, &mut d, &dd, rel, &relative)?;
         timings.assembly += t.elapsed().as_secs_f64();
         let size = d.iter().map(|v| v[0] * v[0] + v[1] * v[1]).sum::<f64>().sqrt();
@@ -505,6 +507,7 @@ fn correct(
         if !sim.model.analysis.line_search || better || alpha < 1e-3 {
             return Ok(res);
         }
+        setup.assembly.recycle(res);
         alpha *= 0.5;
     }
 }

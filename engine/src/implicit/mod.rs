@@ -30,7 +30,7 @@ pub(crate) use inertia::{Inertia, Newmark};
 
 use crate::assembly::{Pattern, Storage};
 use crate::boundary::BoundaryReport;
-use crate::bulk::{evaluate_with, Iterate};
+use crate::bulk::{evaluate_reusing, Iterate};
 use crate::geometry::P2;
 use crate::ibm::IbmReport;
 use crate::linalg::{Condition, SparseRef};
@@ -62,6 +62,9 @@ pub(crate) struct Assembly {
     pub pattern: Pattern,
     /// The pattern's blocks: [`Merged`].
     blocks: Merged,
+    /// The responses' buffer of a residual no longer needed
+    /// ([`Assembly::recycle`]), for the next one.
+    spare: std::sync::Mutex<Vec<Option<crate::material::hencky::Response>>>,
 }
 
 /// The pattern's blocks, one per distinct node list: contributions whose
@@ -143,6 +146,7 @@ impl Assembly {
             symmetry,
             pattern,
             blocks,
+            spare: std::sync::Mutex::new(Vec::new()),
         })
     }
 
@@ -224,8 +228,9 @@ impl Assembly {
     /// contribution in the list's order, then each one's force subtracted.
     pub fn residual(&self, frame: &Frame, d: &[P2]) -> Result<Residual, StepFailure> {
         let motion = frame.motion(d);
-        let it =
-            evaluate_with(frame.sim, &frame.map, &motion, frame.band_view(d)).map_err(|e| e.at_step(frame.step))?;
+        let spare = std::mem::take(&mut *self.spare.lock().unwrap_or_else(|e| e.into_inner()));
+        let it = evaluate_reusing(frame.sim, &frame.map, &motion, frame.band_view(d), spare)
+            .map_err(|e| e.at_step(frame.step))?;
         let at = At {
             frame,
             d,
@@ -248,6 +253,12 @@ impl Assembly {
             r,
             fext,
         })
+    }
+
+    /// Keep `res`'s buffers for the next residual: a residual no longer
+    /// needed (the last iterate's, once its tangent is factorised).
+    pub fn recycle(&self, res: Residual) {
+        *self.spare.lock().unwrap_or_else(|e| e.into_inner()) = res.it.into_responses();
     }
 
     /// The force of the contributions named `name` at unknowns `d` with
