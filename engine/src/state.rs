@@ -88,7 +88,7 @@ pub struct Simulation {
     pub(crate) mass_cache: std::sync::Mutex<MassCache>,
     /// Explicit dynamics: the step's buffers, reused from step to step.
     pub(crate) explicit: crate::dynamics::transfer::Workspace,
-    /// Threads for the explicit step's per-point passes
+    /// Threads for the per-point passes and the tangent's blocks
     /// ([`Simulation::set_threads`]); `None`: one.
     pub(crate) pool: Option<std::sync::Arc<rayon::ThreadPool>>,
     /// The observer's progress hook (behind a mutex so steps can call it
@@ -347,12 +347,14 @@ impl Simulation {
     /// The most threads [`Simulation::set_threads`] starts.
     pub const MAX_THREADS: usize = 256;
 
-    /// Run the explicit step's material updates (the stress passes) on
-    /// `threads` threads; 0 means one per core, 1 (the default) none. The
-    /// results are the same to the bit whatever the count: each point is
-    /// updated on its own, and forces and energies are summed in point
-    /// order afterwards. Other phases, and quasi-static analyses, stay on
-    /// one thread. Returns the threads in use, or why they could not be
+    /// Run the points' material updates (the explicit step's stress
+    /// passes, an implicit step's residuals) and an implicit step's tangent
+    /// blocks on `threads` threads; 0 means one per core, 1 (the default)
+    /// none. The results are the same to the bit whatever the count: each
+    /// point and block is computed on its own, and forces, energies and
+    /// the matrix are summed in point and block order afterwards. Other
+    /// phases (the factorisation and solves among them) stay on one
+    /// thread. Returns the threads in use, or why they could not be
     /// started.
     pub fn set_threads(&mut self, threads: usize) -> Result<usize, String> {
         if threads == 1 {
