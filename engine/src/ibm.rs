@@ -546,7 +546,7 @@ fn fit_exact_with(
         .map_err(|e| FitError::Factor(format!("{e:?}")))?;
     use faer::linalg::solvers::Solve;
     llt.solve_in_place(&mut rhs);
-    crate::linalg::after_wide_kernels();
+    crate::vector_state::after_wide_kernels();
     for (&k, &i) in &index {
         da[k] = [rhs[(i, 0)], rhs[(i, 1)]];
     }

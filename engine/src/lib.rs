@@ -52,6 +52,7 @@ pub mod simulation;
 pub mod solver;
 pub mod state;
 pub mod units;
+mod vector_state;
 pub mod verify;
 
 pub use model::Model;

@@ -61,32 +61,12 @@ impl Factor {
             par(),
             MemStack::new(&mut mem),
         );
-        after_wide_kernels();
+        crate::vector_state::after_wide_kernels();
     }
 }
 
 fn par() -> Par {
     faer::get_global_parallelism()
-}
-
-/// Leave the upper halves of the vector registers clean (`vzeroupper`)
-/// after faer's dense kernels, which are hand-written 512-bit assembly on
-/// CPUs that have it and return with those halves in use. Until something
-/// clears them, every instruction of this crate's scalar (SSE) code pays
-/// for them: measured on the points' material response (Hencky's log,
-/// exp and their tangent), 79 ms per Newton residual against 17 ms clean,
-/// and threads started meanwhile inherit the state. Call after a faer
-/// numeric routine and before a long loop of the crate's own arithmetic;
-/// it changes no value.
-#[inline]
-pub fn after_wide_kernels() {
-    #[cfg(all(target_arch = "x86_64", not(target_feature = "avx")))]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the CPU has AVX (checked above), and code built without
-        // it keeps nothing in the registers' upper halves, which alone
-        // `vzeroupper` clears.
-        unsafe { std::arch::asm!("vzeroupper", options(nomem, nostack, preserves_flags)) }
-    }
 }
 
 /// Why a factorisation failed.
@@ -333,7 +313,7 @@ pub fn numeric_llt(
         MemStack::new(&mut mem),
         Default::default(),
     );
-    after_wide_kernels();
+    crate::vector_state::after_wide_kernels();
     Ok(done.map(|_| ()).map_err(|e| match e {
         faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index } => index,
     }))
@@ -435,7 +415,7 @@ pub fn lu(
         LuError::Generic(faer::sparse::FaerError::OutOfMemory) => FactorError::allocation(what(), bytes as usize),
         other => FactorError::Other(format!("{other:?}")),
     });
-    after_wide_kernels();
+    crate::vector_state::after_wide_kernels();
     f
 }
 
@@ -447,7 +427,7 @@ pub fn solve_lu(factor: &LuFactor, b: &[f64], transpose: bool) -> Vec<f64> {
     } else {
         factor.solve_in_place(&mut x);
     }
-    after_wide_kernels();
+    crate::vector_state::after_wide_kernels();
     (0..b.len()).map(|i| x[(i, 0)]).collect()
 }
 
@@ -598,7 +578,7 @@ pub fn warm_dense_kernels() {
     let a = Mat::<f64>::from_fn(96, 96, |i, j| if i == j { 1.0 } else { 0.0 });
     let mut c = Mat::<f64>::zeros(96, 96);
     faer::linalg::matmul::matmul(c.as_mut(), faer::Accum::Replace, a.as_ref(), a.as_ref(), 1.0, Par::Seq);
-    after_wide_kernels();
+    crate::vector_state::after_wide_kernels();
     std::hint::black_box(&c);
 }
 
@@ -627,7 +607,7 @@ pub fn dense_eigenvalues(a: SparseRef<'_>) -> Option<Vec<f64>> {
     let mut mem = MemBuffer::try_new(req).ok()?;
     let mut s = faer::diag::Diag::<f64>::zeros(n);
     let done = evd::self_adjoint_evd(m, s.as_mut(), None, par(), MemStack::new(&mut mem), Default::default());
-    after_wide_kernels();
+    crate::vector_state::after_wide_kernels();
     done.ok()?;
     Some(s.column_vector().iter().copied().collect())
 }

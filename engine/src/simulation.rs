@@ -49,7 +49,7 @@ impl Simulation {
         }
         // Whatever ran on this thread since the last step (a front end's
         // dense algebra) leaves the step's scalar arithmetic at full speed.
-        crate::linalg::after_wide_kernels();
+        crate::vector_state::after_wide_kernels();
         let mut report = match self.model.analysis.kind {
             crate::scene::AnalysisKind::QuasiStaticLinear => crate::linear::linear_step(self),
             crate::scene::AnalysisKind::QuasiStaticFinite => crate::newton::finite_step(self),

@@ -244,7 +244,7 @@ impl Factorisation {
                     Default::default(),
                 )
                 .is_ok();
-            linalg::after_wide_kernels();
+            crate::vector_state::after_wide_kernels();
             ldlt
         };
         if ldlt && values.iter().all(|v| v.is_finite()) {
@@ -311,14 +311,14 @@ impl Factorisation {
                 let mut x = Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
                 let mut mem = MemBuffer::new(s.solve_in_place_scratch::<f64>(1, par()));
                 LltRef::new(s, v).solve_in_place_with_conj(Conj::No, x.as_mut(), par(), MemStack::new(&mut mem));
-                linalg::after_wide_kernels();
+                crate::vector_state::after_wide_kernels();
                 (0..b.len()).map(|i| x[(i, 0)]).collect()
             }
             Factor::Ldlt(s, v, _) => {
                 let mut x = Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
                 let mut mem = MemBuffer::new(s.solve_in_place_scratch::<f64>(1, par()));
                 LdltRef::new(s, v).solve_in_place_with_conj(Conj::No, x.as_mut(), par(), MemStack::new(&mut mem));
-                linalg::after_wide_kernels();
+                crate::vector_state::after_wide_kernels();
                 (0..b.len()).map(|i| x[(i, 0)]).collect()
             }
         }

@@ -374,7 +374,7 @@ impl Simulation {
             .num_threads(threads)
             .thread_name(|i| format!("mpmlab-points-{i}"))
             // A thread starts with its parent's vector registers.
-            .start_handler(|_| crate::linalg::after_wide_kernels())
+            .start_handler(|_| crate::vector_state::after_wide_kernels())
             .build()
             .map_err(|e| format!("cannot start {threads} threads: {e}"))?;
         let n = pool.current_num_threads();
@@ -399,7 +399,7 @@ impl Simulation {
     ) {
         debug_assert!(b.is_empty() || b.len() == a.len());
         let run = |start: usize, a: &mut [A], b: &mut [B]| {
-            crate::linalg::after_wide_kernels();
+            crate::vector_state::after_wide_kernels();
             let mut b = b.iter_mut();
             for (i, a) in a.iter_mut().enumerate() {
                 f(start + i, a, b.next());
