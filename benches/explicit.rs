@@ -322,7 +322,7 @@ fn throughput() {
         "ratios, {} cores, one run:",
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
-    println!("  {:<46} {:>9} {:>8}  met", "measure", "measured", "target");
+    println!("  {:<50} {:>9} {:>8}  met", "measure", "measured", "target");
     let share = 100.0 * lumped / reference;
     for (what, shown, target, met) in [
         (
@@ -339,7 +339,7 @@ fn throughput() {
         ),
     ] {
         println!(
-            "  {what:<46} {shown:>9} {target:>8}  {}",
+            "  {what:<50} {shown:>9} {target:>8}  {}",
             if met { "yes" } else { "NO" }
         );
     }

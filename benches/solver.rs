@@ -413,10 +413,10 @@ fn main() {
         "ratios, {} cores, one run:",
         std::thread::available_parallelism().map_or(1, |n| n.get())
     );
-    println!("  {:<46} {:>9} {:>8}  met", "measure", "measured", "target");
+    println!("  {:<50} {:>9} {:>8}  met", "measure", "measured", "target");
     for (what, shown, target, met) in &rows {
         println!(
-            "  {what:<46} {shown:>9} {target:>8}  {}",
+            "  {what:<50} {shown:>9} {target:>8}  {}",
             if *met { "yes" } else { "NO" }
         );
     }
