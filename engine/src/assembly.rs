@@ -634,9 +634,11 @@ impl Pattern {
         use rayon::prelude::*;
         let mut values = try_filled(self.nnz(), 0.0, "the values of the sparse matrix")?;
         let mut coupling = try_filled(self.n, 0.0, "the coupling to prescribed values")?;
-        // A batch's blocks and scratch: a few per thread, so each thread
-        // has work while the batch before is scattered.
-        let batch = 64 * pool.current_num_threads();
+        // A batch's blocks and scratch: enough per thread to spread the
+        // work evenly, formed in parallel, then scattered in order before
+        // the next batch is formed. At most 1024 blocks (16 MB of 4 x 4
+        // node blocks with their scratch) whatever the thread count.
+        let batch = (64 * pool.current_num_threads()).min(1024);
         let mut buffers: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); batch.min(blocks.len())];
         let mut bd = Vec::new();
         // The scatter runs on one of the pool's threads too: on a machine

@@ -522,9 +522,9 @@ fn fit_exact_with(
             rhs[(i, 1)] += scale * u[1];
         }
     }
-    let evd = mat
-        .self_adjoint_eigen(faer::Side::Lower)
-        .map_err(|e| FitError::Eigen(format!("{e:?}")))?;
+    let evd = mat.self_adjoint_eigen(faer::Side::Lower);
+    crate::vector_state::after_wide_kernels();
+    let evd = evd.map_err(|e| FitError::Eigen(format!("{e:?}")))?;
     let (lo, hi) = (evd.S()[0], evd.S()[m - 1]);
     if !(lo > 1e-13 * hi) {
         // The node that carries most of the weakest mode: the one whose
@@ -541,9 +541,9 @@ fn fit_exact_with(
             position: grid.node_position(node),
         });
     }
-    let llt = mat
-        .llt(faer::Side::Lower)
-        .map_err(|e| FitError::Factor(format!("{e:?}")))?;
+    let llt = mat.llt(faer::Side::Lower);
+    crate::vector_state::after_wide_kernels();
+    let llt = llt.map_err(|e| FitError::Factor(format!("{e:?}")))?;
     use faer::linalg::solvers::Solve;
     llt.solve_in_place(&mut rhs);
     crate::vector_state::after_wide_kernels();

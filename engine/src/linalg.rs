@@ -856,5 +856,7 @@ fn tridiagonal_max(alpha: &[f64], beta: &[f64]) -> f64 {
             0.0
         }
     });
-    t.self_adjoint_eigenvalues(Side::Lower).map_or(f64::NAN, |ev| ev[m - 1])
+    let ev = t.self_adjoint_eigenvalues(Side::Lower);
+    crate::vector_state::after_wide_kernels();
+    ev.map_or(f64::NAN, |ev| ev[m - 1])
 }

@@ -89,9 +89,10 @@ pub struct TuiArgs {
     /// k, M, G, T); default half of the available memory.
     #[arg(long, value_name = "SIZE", value_parser = parse_size)]
     pub max_memory: Option<u64>,
-    /// Threads for the points' material updates and, in implicit steps,
-    /// the tangent's blocks (0: one per core; default 1). Results are the
-    /// same to the bit for any count.
+    /// Threads for the points' material updates (explicit and
+    /// finite-deformation steps) and the tangent's blocks (implicit steps)
+    /// (0: one per core; default 1). Results are the same to the bit for
+    /// any count.
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Start from a checkpoint of this scene (`run --checkpoint`, or `w`
@@ -144,9 +145,10 @@ pub struct RunArgs {
     pub cadence: RecordArgs,
     #[command(flatten)]
     pub vtk: VtkArgs,
-    /// Threads for the points' material updates and, in implicit steps,
-    /// the tangent's blocks (0: one per core; default 1). Results are the
-    /// same to the bit for any count. Sweeps run one scene per core
+    /// Threads for the points' material updates (explicit and
+    /// finite-deformation steps) and the tangent's blocks (implicit steps)
+    /// (0: one per core; default 1). Results are the same to the bit for
+    /// any count. Sweeps run one scene per core
     /// instead.
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,

@@ -150,6 +150,7 @@ pub fn point_bits(sim: &Simulation) -> Vec<u64> {
         let pairs = [p.x.get(i), p.v.get(i), p.lp.get(i)];
         let tensors = [
             p.stress.get(i).map(|v| &v[..]),
+            p.strain.get(i).map(|v| &v[..]),
             p.def_grad.get(i).map(|v| &v[..]),
             p.b_e.get(i).map(|v| &v[..]),
         ];

@@ -51,8 +51,8 @@ fn run(name: &str, steps: usize, threads: usize) -> (Vec<Vec<u64>>, Vec<u64>, us
 fn same_on_threads(name: &str, steps: usize) {
     let (serial, points_1, n) = run(name, steps, 1);
     let (threaded, points_3, _) = run(name, steps, 3);
-    // The points are split in chunks of at least 64: three threads get
-    // work only with more than 128 points.
+    // The points are split in chunks of at least 64: with more than 192
+    // points each of the three threads can get a chunk.
     assert!(n > 3 * 64, "{name} has {n} points: too few to split");
     for (k, (a, b)) in serial.iter().zip(&threaded).enumerate() {
         assert_eq!(a, b, "{name}: step {} differs on 3 threads", k + 1);
