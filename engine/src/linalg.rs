@@ -319,6 +319,23 @@ pub fn numeric_llt(
     }))
 }
 
+/// Numeric `L D L^T` of `a` into `values` (the analysis `s` of its
+/// pattern): whether faer completed it (its pivots may be of either sign).
+pub fn numeric_ldlt(s: &SymbolicCholesky<Ix>, a: SparseRef<'_>, values: &mut [f64]) -> Result<bool, FactorError> {
+    let mut mem = workspace(s.factorize_numeric_ldlt_scratch::<f64>(par(), Default::default()))?;
+    let done = s.factorize_numeric_ldlt(
+        values,
+        a.as_ref(),
+        Side::Lower,
+        Default::default(),
+        par(),
+        MemStack::new(&mut mem),
+        Default::default(),
+    );
+    crate::vector_state::after_wide_kernels();
+    Ok(done.is_ok())
+}
+
 /// Numeric Cholesky with a symbolic analysis of the same pattern, refused
 /// when its estimate ([`cholesky_bytes`]) exceeds `budget`
 /// ([`check_memory`]); an allocation that fails is an error too.

@@ -25,7 +25,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{LdltRef, LltRef, SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::linalg::solvers::SymbolicLu;
 use faer::sparse::{SparseColMat, Triplet};
-use faer::{Conj, Mat, Par, Side};
+use faer::{Conj, Mat, Par};
 use std::sync::Arc;
 
 /// Which factorisation solved a system.
@@ -231,22 +231,7 @@ impl Factorisation {
                 budget,
             });
         }
-        let ldlt = {
-            let mut mem = linalg::workspace(s.factorize_numeric_ldlt_scratch::<f64>(par(), Default::default()))?;
-            let ldlt = s
-                .factorize_numeric_ldlt(
-                    &mut values,
-                    a.as_ref(),
-                    Side::Lower,
-                    Default::default(),
-                    par(),
-                    MemStack::new(&mut mem),
-                    Default::default(),
-                )
-                .is_ok();
-            crate::vector_state::after_wide_kernels();
-            ldlt
-        };
+        let ldlt = linalg::numeric_ldlt(s, a, &mut values)?;
         if ldlt && values.iter().all(|v| v.is_finite()) {
             let d = pivots(s, &values);
             return Ok(Factorisation {

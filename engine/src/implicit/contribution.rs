@@ -91,21 +91,34 @@ pub(crate) trait Contribution: Sync {
     /// whose block is sparse adds its nonzero entries alone (the sum is
     /// the same to the bit: the others would add zeros).
     fn add_block(&self, k: usize, at: &At, out: &mut [f64], scratch: &mut Vec<f64>) -> Result<(), StepFailure> {
-        self.block(k, at, scratch)?;
-        if scratch.len() != out.len() {
-            return Err(StepFailure::Internal {
-                step: at.frame.step,
-                message: format!(
-                    "the {} contribution's block {k} has {} values where {} were expected",
-                    self.name(),
-                    scratch.len(),
-                    out.len()
-                ),
-            });
-        }
-        for (o, v) in out.iter_mut().zip(scratch.iter()) {
-            *o += v;
-        }
-        Ok(())
+        add_formed(self, k, at, out, scratch)
     }
+}
+
+/// [`Contribution::add_block`] by forming the block in `scratch` and
+/// adding it entry by entry; a block of another size than `out` is a
+/// failure naming the contribution.
+pub(crate) fn add_formed<C: Contribution + ?Sized>(
+    c: &C,
+    k: usize,
+    at: &At,
+    out: &mut [f64],
+    scratch: &mut Vec<f64>,
+) -> Result<(), StepFailure> {
+    c.block(k, at, scratch)?;
+    if scratch.len() != out.len() {
+        return Err(StepFailure::Internal {
+            step: at.frame.step,
+            message: format!(
+                "the {} contribution's block {k} has {} values where {} were expected",
+                c.name(),
+                scratch.len(),
+                out.len()
+            ),
+        });
+    }
+    for (o, v) in out.iter_mut().zip(scratch.iter()) {
+        *o += v;
+    }
+    Ok(())
 }

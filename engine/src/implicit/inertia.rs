@@ -396,17 +396,7 @@ impl Contribution for std::sync::Arc<Inertia> {
     fn add_block(&self, k: usize, at: &At, out: &mut [f64], scratch: &mut Vec<f64>) -> Result<(), StepFailure> {
         let map = &at.frame.map;
         if k >= map.groups.len() || out.len() != (2 * map.groups[k].nodes.len()).pow(2) {
-            self.block(k, at, scratch)?;
-            if scratch.len() != out.len() {
-                return Err(StepFailure::Internal {
-                    step: at.frame.step,
-                    message: format!("the inertia's block {k} does not match the block it joins"),
-                });
-            }
-            for (o, v) in out.iter_mut().zip(scratch.iter()) {
-                *o += v;
-            }
-            return Ok(());
+            return super::contribution::add_formed(self, k, at, out, scratch);
         }
         self.add_group_block(k, at, out);
         Ok(())
